@@ -1,0 +1,19 @@
+"""cdnf_ti: C-DNF looming perception on video, with Taichi kernels.
+
+Quick start::
+
+    from cdnf_ti import CDNF, open_source, iter_grey
+    src = open_source("clip.mp4")
+    trace = CDNF().run(iter_grey(src))
+    print(trace.first_alert, trace.output.max())
+"""
+from .errors import InputError
+from .frames import FrameSource, iter_grey, open_source, to_grey
+from .models import CDNF, MODELS, Model, StepResult, Trace, create_model, get_model_class, register_model
+from .params import CDNFParams
+
+__version__ = "0.1.0"
+
+__all__ = ["CDNF", "CDNFParams", "Model", "StepResult", "Trace", "MODELS", "create_model",
+           "get_model_class", "register_model", "InputError", "FrameSource", "open_source",
+           "iter_grey", "to_grey", "__version__"]

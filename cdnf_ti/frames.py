@@ -1,0 +1,227 @@
+"""Frame conversion and frame sources: video files, image folders, .npy arrays.
+
+Every problem with an input becomes an :class:`~cdnf_ti.errors.InputError`
+whose one-line message names the file.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import cv2
+import numpy as np
+
+from .errors import InputError
+
+IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp")
+
+
+def to_grey(frame: np.ndarray) -> np.ndarray:
+    """Convert a frame to the grey form the models take.
+
+    Parameters
+    ----------
+    frame : ndarray
+        (H, W) uint8 (0..255) or float in [0, 1]; (H, W, 3) BGR uint8 (or float
+        in [0, 1]); (H, W, 1).
+
+    Returns
+    -------
+    ndarray, shape (H, W)
+        uint8 grey, or float32 grey in [0, 1]. BGR is converted with the
+        ITU-R BT.601 luma weights (``cv2.COLOR_BGR2GRAY``).
+
+    Raises
+    ------
+    ValueError
+        Unsupported shape or dtype, or float values outside [0, 1].
+    """
+    a = np.asarray(frame)
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[:, :, 0]
+    if a.ndim == 3 and a.shape[2] in (3, 4):
+        if a.dtype == np.uint8:
+            code = cv2.COLOR_BGR2GRAY if a.shape[2] == 3 else cv2.COLOR_BGRA2GRAY
+            a = cv2.cvtColor(np.ascontiguousarray(a), code)
+        elif np.issubdtype(a.dtype, np.floating):
+            code = cv2.COLOR_BGR2GRAY if a.shape[2] == 3 else cv2.COLOR_BGRA2GRAY
+            a = cv2.cvtColor(np.ascontiguousarray(a, dtype=np.float32), code)
+        else:
+            raise ValueError(f"colour frames must be uint8 or float, got {a.dtype}")
+    if a.ndim != 2:
+        raise ValueError(f"a frame must be (H, W), (H, W, 1) or (H, W, 3) BGR; got shape {a.shape}")
+    if a.shape[0] < 2 or a.shape[1] < 2:
+        raise ValueError(f"a frame must be at least 2x2 pixels; got {a.shape}")
+    if a.dtype == np.uint8:
+        return np.ascontiguousarray(a)
+    if np.issubdtype(a.dtype, np.floating) or a.dtype == np.bool_:
+        a = np.ascontiguousarray(a, dtype=np.float32)
+        lo, hi = float(a.min()), float(a.max())
+        if not (np.isfinite(lo) and np.isfinite(hi)) or lo < -1e-6 or hi > 1 + 1e-6:
+            raise ValueError(f"float frames must lie in [0, 1]; got values in [{lo:g}, {hi:g}]")
+        return a
+    if np.issubdtype(a.dtype, np.integer):
+        raise ValueError(f"integer frames must be uint8 (0..255); got {a.dtype}")
+    raise ValueError(f"unsupported frame dtype {a.dtype}")
+
+
+@dataclass
+class FrameSource:
+    """A re-iterable stream of frames from one input.
+
+    Attributes
+    ----------
+    path : str
+        The input's path (or a stimulus name).
+    fps : float
+        Frame rate (30 when the input does not say).
+    n_frames : int or None
+        Frame count when known in advance.
+    shape : (H, W)
+        Frame size in pixels.
+    """
+
+    path: str
+    fps: float
+    n_frames: int | None
+    shape: tuple[int, int]
+    _iter_factory: object = None
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        return self._iter_factory()  # type: ignore[operator]
+
+    @property
+    def name(self) -> str:
+        """Clip name: the file name without extension."""
+        return Path(self.path).stem if os.path.sep in self.path or "." in self.path else self.path
+
+
+def _checked(path: str, frames: Iterator[np.ndarray], shape: tuple[int, int]) -> Iterator[np.ndarray]:
+    """Yield frames, raising InputError on a size change."""
+    for t, f in enumerate(frames):
+        if f.shape[:2] != shape:
+            raise InputError(path, f"frame {t} is {f.shape[1]}x{f.shape[0]} but frame 0 is "
+                                   f"{shape[1]}x{shape[0]} (frame size changed mid-video)")
+        yield f
+
+
+def open_video(path: str | os.PathLike) -> FrameSource:
+    """Open an OpenCV-readable video file (BGR uint8 frames)."""
+    path = str(path)
+    cap = cv2.VideoCapture(path)
+    if not cap.isOpened():
+        cap.release()
+        raise InputError(path, "cannot open as a video (unsupported format or corrupt file)")
+    ok, first = cap.read()
+    fps = cap.get(cv2.CAP_PROP_FPS) or 30.0
+    count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+    cap.release()
+    if not ok or first is None:
+        raise InputError(path, "contains no decodable frames (empty or corrupt video)")
+    if not (0 < fps < 1000):
+        fps = 30.0
+    shape = first.shape[:2]
+
+    def gen() -> Iterator[np.ndarray]:
+        c = cv2.VideoCapture(path)
+        if not c.isOpened():
+            raise InputError(path, "cannot open as a video (unsupported format or corrupt file)")
+        try:
+            t = 0
+            while True:
+                ok, f = c.read()
+                if not ok or f is None:
+                    break
+                t += 1
+                yield f
+            if t == 0:
+                raise InputError(path, "contains no decodable frames (empty or corrupt video)")
+            if count > 0 and t < count - max(2, count // 50):
+                raise InputError(path, f"decoding stopped at frame {t} of {count} "
+                                       "(truncated or corrupt video)")
+        finally:
+            c.release()
+
+    return FrameSource(path, float(fps), count if count > 0 else None, shape,
+                       lambda: _checked(path, gen(), shape))
+
+
+def open_image_folder(path: str | os.PathLike) -> FrameSource:
+    """Open a folder of images as frames, in sorted file-name order."""
+    path = str(path)
+    files = sorted(p for p in Path(path).iterdir() if p.suffix.lower() in IMAGE_EXTENSIONS)
+    if not files:
+        raise InputError(path, f"folder holds no image files ({', '.join(IMAGE_EXTENSIONS)})")
+    first = cv2.imread(str(files[0]), cv2.IMREAD_UNCHANGED)
+    if first is None:
+        raise InputError(files[0], "cannot read image (unsupported or corrupt)")
+    shape = first.shape[:2]
+
+    def gen() -> Iterator[np.ndarray]:
+        for t, fp in enumerate(files):
+            img = cv2.imread(str(fp), cv2.IMREAD_UNCHANGED)
+            if img is None:
+                raise InputError(fp, "cannot read image (unsupported or corrupt)")
+            if img.dtype == np.uint16:
+                img = (img / 257.0).round().astype(np.uint8)
+            if img.shape[:2] != shape:
+                raise InputError(fp, f"image is {img.shape[1]}x{img.shape[0]} but the first image is "
+                                     f"{shape[1]}x{shape[0]} (frame size changed mid-sequence)")
+            yield img
+
+    return FrameSource(path, 30.0, len(files), shape, gen)
+
+
+def open_npy(path: str | os.PathLike) -> FrameSource:
+    """Open a ``.npy`` array of frames: (T, H, W) or (T, H, W, 3), uint8 or float in [0, 1]."""
+    path = str(path)
+    try:
+        arr = np.load(path, mmap_mode="r", allow_pickle=False)
+    except Exception as e:  # noqa: BLE001 - any failure here is a bad file
+        raise InputError(path, f"cannot read as a NumPy array ({type(e).__name__}: {e})".splitlines()[0])
+    if arr.ndim not in (3, 4) or (arr.ndim == 4 and arr.shape[3] not in (1, 3)):
+        raise InputError(path, f"array must be (T, H, W) or (T, H, W, 3); got shape {arr.shape}")
+    if arr.shape[0] == 0:
+        raise InputError(path, "array holds no frames")
+    shape = tuple(arr.shape[1:3])
+
+    def gen() -> Iterator[np.ndarray]:
+        for t in range(arr.shape[0]):
+            yield np.asarray(arr[t])
+
+    return FrameSource(path, 30.0, int(arr.shape[0]), shape, gen)
+
+
+def open_source(path: str | os.PathLike) -> FrameSource:
+    """Open any supported input: video file, image folder or ``.npy`` array.
+
+    Raises
+    ------
+    InputError
+        Missing, unreadable, empty or corrupt input (message names the file).
+    """
+    p = Path(path)
+    if not p.exists():
+        raise InputError(path, "no such file or folder")
+    if p.is_dir():
+        return open_image_folder(p)
+    if not os.access(p, os.R_OK):
+        raise InputError(path, "permission denied")
+    if p.stat().st_size == 0:
+        raise InputError(path, "file is empty")
+    if p.suffix.lower() == ".npy":
+        return open_npy(p)
+    if p.suffix.lower() in IMAGE_EXTENSIONS:
+        raise InputError(path, "is a single image; give a video, a folder of images or a .npy array")
+    return open_video(p)
+
+
+def iter_grey(source: FrameSource) -> Iterator[np.ndarray]:
+    """Frames of ``source`` converted by :func:`to_grey`, with errors naming the file."""
+    for t, f in enumerate(source):
+        try:
+            yield to_grey(f)
+        except ValueError as e:
+            raise InputError(source.path, f"frame {t}: {e}") from None

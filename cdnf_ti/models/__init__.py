@@ -1,0 +1,37 @@
+"""Model registry: every model behind one interface, looked up by name."""
+from __future__ import annotations
+
+from typing import Any
+
+from .base import Model, NotConvergedWarning, StepResult, Trace
+from .cdnf import CDNF
+
+MODELS: dict[str, type[Model]] = {}
+
+
+def register_model(cls: type[Model]) -> type[Model]:
+    """Add a :class:`Model` subclass to the registry under ``cls.name``."""
+    if not cls.name:
+        raise ValueError(f"{cls.__name__} has no registry name")
+    MODELS[cls.name] = cls
+    return cls
+
+
+def get_model_class(name: str) -> type[Model]:
+    """Look a model up by name (case-insensitive; ``-``/``_`` ignored)."""
+    key = name.lower().replace("-", "").replace("_", "")
+    for k, cls in MODELS.items():
+        if k.replace("_", "").replace("-", "") == key:
+            return cls
+    raise ValueError(f"unknown model {name!r}; available: {', '.join(MODELS)}")
+
+
+def create_model(name: str, params: Any = None, **kwargs: Any) -> Model:
+    """Instantiate a registered model: ``create_model("cdnf", backend="numpy")``."""
+    return get_model_class(name)(params, **kwargs)
+
+
+register_model(CDNF)
+
+__all__ = ["MODELS", "Model", "StepResult", "Trace", "NotConvergedWarning", "CDNF",
+           "register_model", "get_model_class", "create_model"]

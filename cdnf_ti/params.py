@@ -1,0 +1,205 @@
+"""C-DNF model description: parameters, activation functions and lateral kernels.
+
+Everything the equations of ``shared/spec/MODEL.md`` need lives here, in NumPy,
+independent of any execution backend:
+
+* ``u_on  = P_on  - h + vartheta(W_c (*) u_on)``           (ON contrast field)
+* ``u_off = P_off - h + vartheta(W_c (*) u_off)``          (OFF contrast field)
+* ``v = alpha_on theta([u_on]+) + alpha_off theta([u_off]+) - h + vartheta(W_s (*) v)``
+* ``I_v = sigmoid(mean theta([v]+))``, ``spike = I_v > 0.5 + epsilon``
+
+with ``vartheta(a) = 2 / (1 + exp(-a)) - 1 = tanh(a / 2)`` and
+``theta(a) = tanh(a) (e^2 + 1) / (e^2 - 1) = tanh(a) / tanh(1)``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+BORDER_MODES = ("replicate", "reflect", "zero")
+
+
+def vartheta(a: np.ndarray | float) -> np.ndarray | float:
+    """Lateral-interaction threshold function ``2 / (1 + exp(-a)) - 1``.
+
+    Parameters
+    ----------
+    a : array_like
+        Lateral input (dimensionless).
+
+    Returns
+    -------
+    ndarray
+        Values in (-1, 1); identical to ``tanh(a / 2)``.
+    """
+    return np.tanh(np.asarray(a) * 0.5)
+
+
+THETA_SCALE = (math.e**2 + 1.0) / (math.e**2 - 1.0)  # == 1 / tanh(1)
+
+
+def theta(a: np.ndarray | float) -> np.ndarray | float:
+    """Activation ``tanh(a) (e^2 + 1) / (e^2 - 1)``, so ``theta(1) = 1``."""
+    return np.tanh(np.asarray(a)) * THETA_SCALE
+
+
+def sigmoid(a: float) -> float:
+    """Logistic function ``1 / (1 + exp(-a))`` (float64)."""
+    return 1.0 / (1.0 + math.exp(-a))
+
+
+@dataclass(frozen=True)
+class CDNFParams:
+    """Parameters of the C-DNF model (defaults from MODEL.md / the paper).
+
+    Attributes
+    ----------
+    h : float
+        Resting level of all three fields (paper: 0.2).
+    alpha_on, alpha_off : float
+        Weights of the ON and OFF contrast outputs in the Summation field (0.5 each).
+    sigma_c : float
+        Spread of the 3x3 normalised Gaussian lateral excitation ``W_c`` (px, 1.0).
+    sigma_1 : float
+        Excitatory spread of the Summation DoG ``W_s`` (px, 1/3).
+    sigma_2 : float or None
+        Inhibitory spread of ``W_s`` (px); ``None`` means ``3 * sigma_1``.
+    A, B : float
+        DoG amplitudes (3/2 and 1/2); ``W_s`` is not normalised.
+    radius_s : int or None
+        Truncation radius of ``W_s`` (px); ``None`` means ``ceil(3 * sigma_2)``.
+    epsilon : float
+        Alert margin: ``spike = I_v > 0.5 + epsilon`` (0.006).
+    tol : float
+        Fixed-point tolerance on ``max |F(u) - u|`` per field (1e-5).
+    max_iter : int
+        Iteration cap per field and frame (200).
+    damping : float
+        Initial relaxation ``lambda`` in ``u <- (1 - lambda) u + lambda F(u)`` (1.0).
+    min_damping : float
+        Smallest ``lambda`` the solver halves down to when the residual stalls.
+    stall_patience : int
+        Iterations without residual decrease before ``lambda`` is halved.
+    warm_start : bool
+        Start each frame's iteration from the previous frame's solution (True)
+        or from the resting state (False). Both give the same fixed point.
+    border : {"replicate", "reflect", "zero"}
+        Boundary handling of the lateral kernels (``replicate`` = OpenCV
+        ``BORDER_REPLICATE``; ``reflect`` = ``BORDER_REFLECT_101``; ``zero`` =
+        constant 0 outside the frame).
+    """
+
+    h: float = 0.2
+    alpha_on: float = 0.5
+    alpha_off: float = 0.5
+    sigma_c: float = 1.0
+    sigma_1: float = 1.0 / 3.0
+    sigma_2: float | None = None
+    A: float = 1.5
+    B: float = 0.5
+    radius_s: int | None = None
+    epsilon: float = 0.006
+    tol: float = 1e-5
+    max_iter: int = 200
+    damping: float = 1.0
+    min_damping: float = 1.0 / 64.0
+    stall_patience: int = 4
+    warm_start: bool = True
+    border: str = "replicate"
+
+    def __post_init__(self) -> None:
+        if self.sigma_2 is None:
+            object.__setattr__(self, "sigma_2", 3.0 * self.sigma_1)
+        if self.radius_s is None:
+            object.__setattr__(self, "radius_s", int(math.ceil(3.0 * self.sigma_2 - 1e-9)))
+        self.validate()
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` with a clear message for an invalid value."""
+        checks = [
+            (self.sigma_c > 0, f"sigma_c must be > 0, got {self.sigma_c}"),
+            (self.sigma_1 > 0, f"sigma_1 must be > 0, got {self.sigma_1}"),
+            (self.sigma_2 > 0, f"sigma_2 must be > 0, got {self.sigma_2}"),
+            (self.tol > 0, f"tol must be > 0, got {self.tol}"),
+            (int(self.max_iter) == self.max_iter and self.max_iter >= 1,
+             f"max_iter must be a positive integer, got {self.max_iter}"),
+            (0 < self.damping <= 1, f"damping must be in (0, 1], got {self.damping}"),
+            (0 < self.min_damping <= self.damping,
+             f"min_damping must be in (0, damping], got {self.min_damping}"),
+            (self.stall_patience >= 1, f"stall_patience must be >= 1, got {self.stall_patience}"),
+            (int(self.radius_s) == self.radius_s and self.radius_s >= 1,
+             f"radius_s must be a positive integer, got {self.radius_s}"),
+            (self.border in BORDER_MODES,
+             f"border must be one of {BORDER_MODES}, got {self.border!r}"),
+            (math.isfinite(self.h), f"h must be finite, got {self.h}"),
+            (self.epsilon >= 0, f"epsilon must be >= 0, got {self.epsilon}"),
+            (self.alpha_on >= 0 and self.alpha_off >= 0,
+             f"alpha_on/alpha_off must be >= 0, got {self.alpha_on}/{self.alpha_off}"),
+        ]
+        for ok, msg in checks:
+            if not ok:
+                raise ValueError(f"CDNFParams: {msg}")
+
+    @property
+    def threshold(self) -> float:
+        """Alert threshold ``I_thre = 0.5 + epsilon``."""
+        return 0.5 + self.epsilon
+
+    def replace(self, **changes: Any) -> "CDNFParams":
+        """Return a copy with some fields changed (validated)."""
+        return replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def contrast_kernel(sigma_c: float) -> np.ndarray:
+    """The 3x3 normalised Gaussian ``W_c`` (sums to 1), float64, shape (3, 3)."""
+    d = np.arange(-1, 2, dtype=np.float64)
+    g = np.exp(-(d[:, None] ** 2 + d[None, :] ** 2) / (2.0 * sigma_c**2))
+    return g / g.sum()
+
+
+def dog_profiles(params: CDNFParams) -> tuple[np.ndarray, np.ndarray]:
+    """1-D factors of the DoG: ``W_s = A g1 g1^T - B g2 g2^T``.
+
+    Returns
+    -------
+    g1, g2 : ndarray, shape (2 R + 1,)
+        ``g_k(d) = exp(-d^2 / (2 sigma_k^2))`` for ``d = -R..R`` (unnormalised).
+    """
+    r = int(params.radius_s)
+    d = np.arange(-r, r + 1, dtype=np.float64)
+    g1 = np.exp(-(d**2) / (2.0 * params.sigma_1**2))
+    g2 = np.exp(-(d**2) / (2.0 * params.sigma_2**2))
+    return g1, g2
+
+
+def dog_kernel(params: CDNFParams) -> np.ndarray:
+    """The truncated Difference-of-Gaussians ``W_s``, float64, shape (2R+1, 2R+1).
+
+    ``W_s(dx, dy) = A exp(-(dx^2 + dy^2) / (2 sigma_1^2)) - B exp(-(dx^2 + dy^2) / (2 sigma_2^2))``
+    """
+    g1, g2 = dog_profiles(params)
+    return params.A * np.outer(g1, g1) - params.B * np.outer(g2, g2)
+
+
+def resting_level(h: float, gain: float) -> float:
+    """Uniform stationary value ``u*`` of ``u = -h + vartheta(gain * u)``.
+
+    For a uniform field with a replicate border the lateral input is
+    ``gain * u`` with ``gain = sum(W)``. Solved by Newton's method in float64.
+    """
+    u = -h
+    for _ in range(100):
+        t = math.tanh(0.5 * gain * u)
+        f = -h + t - u
+        df = 0.5 * gain * (1.0 - t * t) - 1.0
+        step = f / df
+        u -= step
+        if abs(step) < 1e-15:
+            break
+    return u

@@ -1,0 +1,131 @@
+"""Plain NumPy float64 implementation of the C-DNF field updates.
+
+This is the oracle the Taichi kernels are tested against, and the
+``backend="numpy"`` of :class:`cdnf_ti.CDNF`. It follows ``params.py`` to the
+letter: direct 2-D correlations (no separable shortcut), ``np.tanh`` in float64.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .params import CDNFParams, contrast_kernel, dog_kernel, resting_level, theta, vartheta
+
+_PAD_MODE = {"replicate": "edge", "reflect": "reflect", "zero": "constant"}
+
+
+def correlate(x: np.ndarray, kernel: np.ndarray, border: str) -> np.ndarray:
+    """2-D correlation ``sum_ij K(i, j) x(y + i, x + j)`` with a border mode.
+
+    Parameters
+    ----------
+    x : ndarray, shape (H, W)
+        Field, float64.
+    kernel : ndarray, shape (2r+1, 2r+1)
+        Correlation weights.
+    border : {"replicate", "reflect", "zero"}
+        Values outside the frame.
+    """
+    r = kernel.shape[0] // 2
+    h, w = x.shape
+    xp = np.pad(x, r, mode=_PAD_MODE[border])
+    out = np.zeros_like(x, dtype=np.float64)
+    for i in range(kernel.shape[0]):
+        for j in range(kernel.shape[1]):
+            out += kernel[i, j] * xp[i : i + h, j : j + w]
+    return out
+
+
+class NumpyCDNFBackend:
+    """C-DNF field state and updates in NumPy float64.
+
+    Parameters
+    ----------
+    params : CDNFParams
+    shape : (H, W)
+        Frame size in pixels.
+    """
+
+    name = "numpy"
+
+    def __init__(self, params: CDNFParams, shape: tuple[int, int]):
+        self.params = params
+        self.shape = tuple(shape)
+        self.w_c = contrast_kernel(params.sigma_c)
+        self.w_s = dog_kernel(params)
+        self.L = np.zeros(self.shape)
+        self.P = np.zeros(self.shape)
+        u0 = resting_level(params.h, 1.0)
+        v0 = resting_level(params.h, float(self.w_s.sum()))
+        self.u_on = np.full(self.shape, u0)
+        self.u_off = np.full(self.shape, u0)
+        self.v = np.full(self.shape, v0)
+        self.S = np.zeros(self.shape)
+        self._rest: tuple[np.ndarray, np.ndarray] | None = None
+
+    # -- state -----------------------------------------------------------
+    def save_rest(self) -> None:
+        """Remember the current (resting) fields for cold starts."""
+        self._rest = (self.u_on.copy(), self.v.copy())
+
+    def restore_rest(self) -> None:
+        """Put all fields back to the remembered resting state."""
+        u, v = self._rest
+        self.u_on[...] = u
+        self.u_off[...] = u
+        self.v[...] = v
+
+    def load(self, grey: np.ndarray, first: bool) -> None:
+        """Take a new frame: ``P = L(t) - L(t-1)`` (0 on the first frame).
+
+        ``grey`` is (H, W), uint8 (0..255) or float in [0, 1].
+        """
+        g = grey.astype(np.float64)
+        if grey.dtype == np.uint8:
+            g /= 255.0
+        self.P = np.zeros(self.shape) if first else g - self.L
+        self.L = g
+
+    def clear_input(self) -> None:
+        self.P = np.zeros(self.shape)
+
+    # -- field updates ---------------------------------------------------
+    def contrast_iterate(self, lam: float) -> tuple[float, float]:
+        """One relaxed update of the ON and OFF fields; returns their residuals."""
+        p, b = self.params, self.params.border
+        p_on = np.maximum(self.P, 0.0)
+        p_off = -np.minimum(self.P, 0.0)
+        f_on = p_on - p.h + vartheta(correlate(self.u_on, self.w_c, b))
+        f_off = p_off - p.h + vartheta(correlate(self.u_off, self.w_c, b))
+        d_on = f_on - self.u_on
+        d_off = f_off - self.u_off
+        self.u_on = self.u_on + lam * d_on
+        self.u_off = self.u_off + lam * d_off
+        return float(np.abs(d_on).max()), float(np.abs(d_off).max())
+
+    def summation_input(self) -> None:
+        """``S = alpha_on theta([u_on]+) + alpha_off theta([u_off]+)``."""
+        p = self.params
+        self.S = p.alpha_on * theta(np.maximum(self.u_on, 0.0)) + p.alpha_off * theta(
+            np.maximum(self.u_off, 0.0)
+        )
+
+    def summation_iterate(self, lam: float) -> tuple[float]:
+        """One relaxed update of the Summation field; returns its residual."""
+        p = self.params
+        f = self.S - p.h + vartheta(correlate(self.v, self.w_s, p.border))
+        d = f - self.v
+        self.v = self.v + lam * d
+        return (float(np.abs(d).max()),)
+
+    def mean_activation(self) -> float:
+        """``mean_xy theta([v]+)`` in float64."""
+        return float(np.mean(theta(np.maximum(self.v, 0.0))))
+
+    def fields(self) -> dict[str, np.ndarray]:
+        """Copies of the three fields and the input, float64 (H, W)."""
+        return {
+            "u_on": self.u_on.copy(),
+            "u_off": self.u_off.copy(),
+            "v": self.v.copy(),
+            "P": self.P.copy(),
+        }
