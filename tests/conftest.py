@@ -1,0 +1,32 @@
+"""Shared fixtures: one Taichi runtime per test session, small stimuli, shared data."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_REAL = REPO.parent / "shared" / "data" / "real"
+
+
+@pytest.fixture(scope="session", autouse=True)
+def taichi_runtime():
+    """Initialise Taichi on the CPU once for the whole session."""
+    from cdnf_ti.taichi_runtime import ensure_taichi
+
+    return ensure_taichi("cpu")
+
+
+@pytest.fixture(scope="session")
+def shared_real() -> Path | None:
+    """The shared dashcam clips folder, or None when ../shared is absent."""
+    return SHARED_REAL if (SHARED_REAL / "labels.csv").exists() else None
+
+
+def small_stimulus(name: str, size: int = 96, **kw):
+    """A basic stimulus scaled down for fast tests (same geometry as 600x600)."""
+    from cdnf_ti.stimuli.basic import basic_stimulus
+
+    return basic_stimulus(name, height=size, width=size, start_half_size=size / 60, **kw)
