@@ -7,6 +7,10 @@ Quick start::
     trace = CDNF().run(iter_grey(src))
     print(trace.first_alert, trace.output.max())
 """
+import os as _os
+
+_os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")  # keep CLI output clean
+
 from .errors import InputError
 from .frames import FrameSource, iter_grey, open_source, to_grey
 from .models import CDNF, MODELS, Model, StepResult, Trace, create_model, get_model_class, register_model

@@ -1,0 +1,348 @@
+"""The dataset run engine: every labelled clip x model x condition (clean / rain), resumable.
+
+Output folder layout (every file written atomically)::
+
+    OUT/traces/<condition>/<clip>.<model>.csv    per-frame trace (Trace.to_csv)
+    OUT/traces/<condition>/<clip>.<model>.json   what the run of that trace recorded (done marker)
+    OUT/results.csv                              one row per clip x model x condition
+    OUT/threshold_sweep.csv                      accuracy / hits / false alarms vs alert level
+    OUT/summary.md, OUT/summary.json             Table II style summary
+    OUT/figures/*.png                            traces (Fig. 5 style), threshold sweep, accuracy
+
+A (clip, model, condition) whose ``.json`` exists is finished and skipped on a
+rerun; scoring is always recomputed from the saved traces, so a rerun with a
+different window padding re-scores without running any model.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+import warnings
+import zlib
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+from ..atomic import atomic_write_json
+from ..errors import InputError
+from .labels import ClipLabel, read_labels, validate_dataset
+from .scoring import Padding, score_clip
+
+CONDITIONS = ("clean", "rain")
+RAIN_CHOICES = {"none": ("clean",), "only": ("rain",), "both": ("clean", "rain")}
+
+#: Columns of results.csv, in order.
+RESULT_COLUMNS = (
+    "clip", "model", "condition", "label", "window_start", "window_end", "window_lo", "window_hi",
+    "contact_frame", "frames", "fps", "first_alert", "first_alert_s", "outcome", "fn_reason",
+    "lead_time_ms", "output_name", "max_output", "threshold", "snr_db", "unconverged_frames",
+    "seconds", "error",
+)
+
+
+def rain_seed(seed: int, clip: str) -> int:
+    """The rain seed of one clip: a function of the run seed and the clip name only
+    (so it does not depend on the order or place the clip runs)."""
+    return (int(seed) * 1_000_003 + zlib.crc32(clip.encode("utf-8"))) % (2**32)
+
+
+@dataclass(frozen=True)
+class ClipTask:
+    """One clip under one condition, for the models not yet finished.
+
+    Attributes
+    ----------
+    clip : str
+    path : str
+        The clip's file.
+    condition : {"clean", "rain"}
+    models : tuple of str
+    out : str
+        The run's output folder.
+    seed : int
+        Run seed (rain).
+    backend, arch : str
+        Model backend and Taichi arch.
+    rain_params : dict or None
+        Keyword arguments of ``RainParams``.
+    """
+
+    clip: str
+    path: str
+    condition: str
+    models: tuple[str, ...]
+    out: str
+    seed: int = 0
+    backend: str = "taichi"
+    arch: str = "cpu"
+    rain_params: dict | None = None
+
+
+def trace_path(out: str | os.PathLike, condition: str, clip: str, model: str, ext: str = "csv") -> Path:
+    """``OUT/traces/<condition>/<clip>.<model>.<ext>``."""
+    return Path(out) / "traces" / condition / f"{clip}.{model}.{ext}"
+
+
+def load_meta(out: str | os.PathLike, condition: str, clip: str, model: str) -> dict | None:
+    """The finished record of (clip, model, condition), or None if not finished."""
+    jp = trace_path(out, condition, clip, model, "json")
+    cp = trace_path(out, condition, clip, model, "csv")
+    if not (jp.is_file() and cp.is_file()):
+        return None
+    try:
+        meta = json.loads(jp.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return meta if isinstance(meta, dict) and meta.get("model") == model else None
+
+
+def _frames(task: ClipTask, src):
+    """The frame stream of a task (grey; rainy for the rain condition) and the rain object."""
+    from ..frames import iter_grey
+
+    grey = iter_grey(src)
+    if task.condition == "clean":
+        return grey, None
+    try:
+        from ..stimuli.rain import RainParams, RainyFrames
+    except ImportError as e:
+        raise RuntimeError("synthetic rain is not available (cdnf_ti.stimuli.rain missing)") from e
+    params = RainParams(**task.rain_params) if task.rain_params else None
+    rain = RainyFrames(grey, params, seed=rain_seed(task.seed, task.clip))
+    return rain, rain
+
+
+def run_clip_task(task: ClipTask) -> list[dict]:
+    """Run the task's models on its clip; save each trace and its record.
+
+    Returns
+    -------
+    list of dict
+        One record per model: ``clip, model, condition, frames, fps,
+        first_alert, max_output, output_name, threshold, snr_db,
+        unconverged_frames, seconds, error`` (``error`` empty on success). A
+        clip that cannot be opened or decoded gives records with ``error`` set;
+        nothing is saved for them, so a rerun tries again.
+    """
+    from ..frames import open_source
+    from ..models import create_model
+    from .parallel import init_worker
+
+    if task.backend == "taichi":
+        init_worker(task.arch)
+    records: list[dict] = []
+    base = {"clip": task.clip, "condition": task.condition}
+    try:
+        src = open_source(task.path)
+    except InputError as e:
+        return [dict(base, model=m, error=str(e)) for m in task.models]
+    for i, name in enumerate(task.models):
+        try:
+            model = create_model(name, backend=task.backend, arch=task.arch, fps=src.fps)
+            frames, rain = _frames(task, src)
+            t0 = time.perf_counter()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                trace = model.run(frames, progress=False)
+            wall = time.perf_counter() - t0
+        except (InputError, ValueError, RuntimeError, OSError) as e:
+            msg = str(e) if isinstance(e, InputError) else f"{task.path}: {e}".splitlines()[0]
+            records.append(dict(base, model=name, error=msg))
+            if isinstance(e, InputError):  # the clip itself is bad: every model would fail the same way
+                records.extend(dict(base, model=m, error=msg) for m in task.models[i + 1:])
+                break
+            continue
+        snr = None
+        if rain is not None:
+            s = getattr(rain, "snr_db", None)
+            snr = None if s is None or not math.isfinite(float(s)) else float(s)
+        meta = dict(
+            base, model=name, frames=trace.n_frames, fps=float(src.fps), first_alert=trace.first_alert,
+            max_output=float(trace.output.max()) if trace.n_frames else None,
+            output_name=trace.output_name, threshold=trace.threshold, snr_db=snr,
+            unconverged_frames=int((~trace.converged).sum()), seconds=round(wall, 3),
+            source=str(task.path), seed=task.seed if rain is not None else None,
+            rain_seed=rain_seed(task.seed, task.clip) if rain is not None else None, error="",
+        )
+        trace.to_csv(trace_path(task.out, task.condition, task.clip, name))
+        atomic_write_json(trace_path(task.out, task.condition, task.clip, name, "json"), meta)
+        records.append(meta)
+    return records
+
+
+@dataclass
+class DatasetRun:
+    """Everything a dataset run produced.
+
+    Attributes
+    ----------
+    rows : list of dict
+        results.csv rows (:data:`RESULT_COLUMNS`), in labels x condition x model order.
+    labels : list of ClipLabel
+    models : list of str
+    conditions : list of str
+    padding : Padding
+    out : Path
+    ran, skipped : int
+        (clip, model, condition) runs done now / found finished on disk.
+    sweep : list of dict
+        Threshold-sweep rows.
+    summary : dict
+        The summary.json content.
+    """
+
+    rows: list[dict]
+    labels: list[ClipLabel]
+    models: list[str]
+    conditions: list[str]
+    padding: Padding
+    out: Path
+    ran: int = 0
+    skipped: int = 0
+    sweep: list[dict] = field(default_factory=list)
+    summary: dict = field(default_factory=dict)
+
+    @property
+    def n_errors(self) -> int:
+        return sum(1 for r in self.rows if r.get("error"))
+
+    @property
+    def failed(self) -> bool:
+        return self.n_errors > 0
+
+
+def build_row(label: ClipLabel, model: str, condition: str, meta: dict | None, padding: Padding) -> dict:
+    """One results.csv row from a label and a finished (or failed) record."""
+    row: dict[str, Any] = {k: "" for k in RESULT_COLUMNS}
+    row.update(clip=label.clip, model=model, condition=condition, label=label.label,
+               window_start=label.window_start, window_end=label.window_end, contact_frame=label.contact_frame)
+    if meta is None:
+        row["error"] = "not run"
+        return row
+    if meta.get("error"):
+        row["error"] = meta["error"]
+        return row
+    fps = float(meta.get("fps") or 30.0)
+    fa = meta.get("first_alert")
+    sc = score_clip(fa, label, fps, padding)
+    row.update(
+        window_lo=sc.window_lo, window_hi=sc.window_hi, frames=meta.get("frames"), fps=fps,
+        first_alert=fa, first_alert_s=None if fa is None else round(fa / fps, 4),
+        outcome=sc.outcome, fn_reason=sc.fn_reason,
+        lead_time_ms=None if sc.lead_time_ms is None else round(sc.lead_time_ms, 3),
+        output_name=meta.get("output_name"), max_output=meta.get("max_output"), threshold=meta.get("threshold"),
+        snr_db=meta.get("snr_db"), unconverged_frames=meta.get("unconverged_frames"),
+        seconds=meta.get("seconds"), error="",
+    )
+    return row
+
+
+def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None, out: str | os.PathLike,
+                models: Sequence[str] = ("cdnf",), rain: str = "none", padding: Padding = Padding(),
+                seed: int = 0, workers: int | None = None, scheduler: Any = None, backend: str = "taichi",
+                arch: str = "cpu", progress: bool = True, figures: bool = True,
+                rain_params: dict | None = None,
+                on_record: Callable[[dict], None] | None = None) -> DatasetRun:
+    """Run ``models`` on every labelled clip of ``folder`` and write the reports.
+
+    Parameters
+    ----------
+    folder : path-like
+        Folder of videos.
+    labels_path : path-like or None
+        Labels CSV (None: ``folder/labels.csv``).
+    out : path-like
+        Output folder (created; finished work found there is reused).
+    models : sequence of str
+        Registry names.
+    rain : {"none", "only", "both"}
+        Clean clips, clips with synthetic rain, or both.
+    padding : Padding
+        Window padding in frames.
+    seed : int
+        Rain seed (each clip's rain depends only on this and the clip name).
+    workers : int, optional
+        Local worker processes (None = one per core; 0/1 = in this process).
+    scheduler : str or distributed.Client, optional
+        Dask scheduler address: run the clip tasks on that cluster instead.
+    backend, arch : str
+        Model backend and Taichi arch.
+    progress : bool
+        tqdm bar over clip tasks.
+    figures : bool
+        Draw the figures.
+    rain_params : dict, optional
+        Keyword arguments of ``cdnf_ti.stimuli.rain.RainParams``.
+    on_record : callable, optional
+        Called in this process with each record as it arrives (for tests / logging).
+
+    Raises
+    ------
+    InputError
+        Bad labels file (before any work starts).
+    ValueError
+        Bad option.
+    """
+    from .reports import write_reports
+
+    if rain not in RAIN_CHOICES:
+        raise ValueError(f"--rain must be one of {', '.join(RAIN_CHOICES)}, got {rain!r}")
+    folder = Path(folder)
+    labels_path = Path(labels_path) if labels_path is not None else folder / "labels.csv"
+    labels = read_labels(labels_path)
+    files = validate_dataset(labels, folder, labels_path)
+    conditions = list(RAIN_CHOICES[rain])
+    models = list(dict.fromkeys(models))
+    if not models:
+        raise ValueError("no model named")
+    if "rain" in conditions:
+        try:
+            from ..stimuli import rain as _rain  # noqa: F401
+        except ImportError:
+            raise ValueError("synthetic rain is not available in this installation "
+                             "(cdnf_ti.stimuli.rain missing); use --rain none") from None
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+
+    metas: dict[tuple[str, str, str], dict] = {}
+    tasks: list[ClipTask] = []
+    skipped = 0
+    for lab in labels:
+        for cond in conditions:
+            todo = []
+            for m in models:
+                meta = load_meta(out, cond, lab.clip, m)
+                if meta is not None:
+                    metas[(lab.clip, m, cond)] = meta
+                    skipped += 1
+                else:
+                    todo.append(m)
+            if todo:
+                tasks.append(ClipTask(lab.clip, str(files[lab.clip]), cond, tuple(todo), str(out), seed,
+                                      backend, arch, rain_params))
+    from .parallel import TaskFailed, map_tasks
+
+    ran = 0
+    for i, res in map_tasks(run_clip_task, tasks, workers=workers, scheduler=scheduler, arch=arch,
+                            progress="clips" if progress else False):
+        t = tasks[i]
+        recs = ([dict(clip=t.clip, model=m, condition=t.condition, error=f"{t.path}: {res}") for m in t.models]
+                if isinstance(res, TaskFailed) else res)
+        for r in recs:
+            metas[(r["clip"], r["model"], r["condition"])] = r
+            ran += 0 if r.get("error") else 1
+            if on_record is not None:
+                on_record(r)
+    rows = [build_row(lab, m, c, metas.get((lab.clip, m, c)), padding)
+            for lab in labels for c in conditions for m in models]
+    result = DatasetRun(rows, labels, models, conditions, padding, out, ran, skipped)
+    write_reports(result, dataset=str(folder), labels_path=str(labels_path), seed=seed, figures=figures,
+                  progress=progress)
+    return result
+
+
+def config_dict(**kw: Any) -> dict:
+    """JSON-safe copy of run options (for summary.json)."""
+    return {k: (asdict(v) if hasattr(v, "__dataclass_fields__") else v) for k, v in kw.items()}

@@ -1,0 +1,230 @@
+"""Labels of a dataset: reading and validating the labels CSV (shared/spec/EVALUATION.md).
+
+A labels file has one row per clip; columns are found by their header names
+(``clip,label,window_start,window_end[,contact_frame]``) and any other column
+is ignored. Every problem is an :class:`~cdnf_ti.errors.InputError` naming the
+file and the row (1-based line number in the file, the header being line 1),
+raised before any model work starts.
+"""
+from __future__ import annotations
+
+import csv
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Iterable
+
+from ..errors import InputError
+
+#: Label values and the class each maps to (``near-miss`` counts as non-collision).
+LABEL_VALUES = {"collision": True, "non-collision": False, "noncollision": False, "non_collision": False,
+                "near-miss": False, "near_miss": False, "nearmiss": False}
+REQUIRED_COLUMNS = ("clip", "label", "window_start", "window_end")
+#: File name endings tried, in order, when looking a clip up in the dataset folder.
+VIDEO_EXTENSIONS = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv", ".npy")
+
+
+@dataclass(frozen=True)
+class ClipLabel:
+    """The label of one clip.
+
+    Attributes
+    ----------
+    clip : str
+        Clip name (the video's file name without extension).
+    label : str
+        The label as written in the file (``collision``, ``non-collision``, ``near-miss``).
+    collision : bool
+        True for a collision clip.
+    window_start, window_end : int or None
+        The potential-collision window, frames, 0-based, inclusive (collision clips only).
+    contact_frame : int or None
+        Frame of contact, when known (used for the lead time).
+    row : int
+        Line number of the row in the labels file (header = 1).
+    """
+
+    clip: str
+    label: str
+    collision: bool
+    window_start: int | None
+    window_end: int | None
+    contact_frame: int | None
+    row: int
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _int_field(path: str, line: int, name: str, text: str) -> int | None:
+    text = text.strip()
+    if text == "":
+        return None
+    try:
+        val = float(text)
+    except ValueError:
+        raise InputError(path, f"row {line}: {name} {text!r} is not a frame number") from None
+    if not val.is_integer():
+        raise InputError(path, f"row {line}: {name} {text!r} is not a whole frame number")
+    if val < 0:
+        raise InputError(path, f"row {line}: {name} {text!r} is negative")
+    return int(val)
+
+
+def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
+    """Read and check a labels CSV (without looking at the videos).
+
+    Parameters
+    ----------
+    path : path-like
+        The labels file.
+
+    Returns
+    -------
+    list of ClipLabel
+        In file order.
+
+    Raises
+    ------
+    InputError
+        Missing file, missing columns, an unknown label value, a bad or missing
+        window, ``window_start > window_end``, a duplicate clip, or an empty file;
+        the message names the row.
+    """
+    path = str(path)
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(path, "labels file not found")
+    try:
+        with open(p, newline="", encoding="utf-8-sig") as f:
+            rows = list(csv.reader(f))
+    except (OSError, UnicodeDecodeError, csv.Error) as e:
+        raise InputError(path, f"cannot read labels file ({type(e).__name__}: {e})".splitlines()[0]) from None
+    rows = [r for r in rows if any(c.strip() for c in r)]
+    if not rows:
+        raise InputError(path, "labels file is empty")
+    header = [h.strip().lower() for h in rows[0]]
+    missing = [c for c in REQUIRED_COLUMNS if c not in header]
+    if missing:
+        raise InputError(path, f"header lacks column(s) {', '.join(missing)} "
+                               f"(need {','.join(REQUIRED_COLUMNS)}[,contact_frame])")
+    col = {name: header.index(name) for name in header if name}
+    labels: list[ClipLabel] = []
+    seen: dict[str, int] = {}
+    for line, r in enumerate(rows[1:], start=2):
+        def get(name: str) -> str:
+            i = col.get(name)
+            return r[i] if i is not None and i < len(r) else ""
+
+        clip = get("clip").strip()
+        if not clip:
+            raise InputError(path, f"row {line}: empty clip name")
+        if clip in seen:
+            raise InputError(path, f"row {line}: clip {clip!r} is already labelled in row {seen[clip]}")
+        seen[clip] = line
+        lab = get("label").strip()
+        key = lab.lower()
+        if key not in LABEL_VALUES:
+            raise InputError(path, f"row {line} ({clip}): label {lab!r} is not collision, non-collision "
+                                   "or near-miss")
+        collision = LABEL_VALUES[key]
+        ws = _int_field(path, line, "window_start", get("window_start"))
+        we = _int_field(path, line, "window_end", get("window_end"))
+        cf = _int_field(path, line, "contact_frame", get("contact_frame"))
+        if collision:
+            if ws is None or we is None:
+                raise InputError(path, f"row {line} ({clip}): a collision clip needs window_start and window_end")
+            if ws > we:
+                raise InputError(path, f"row {line} ({clip}): window_start {ws} > window_end {we}")
+        elif ws is not None or we is not None:
+            raise InputError(path, f"row {line} ({clip}): a {lab} clip must have an empty window")
+        labels.append(ClipLabel(clip, lab, collision, ws, we, cf, line))
+    if not labels:
+        raise InputError(path, "labels file has a header but no rows")
+    return labels
+
+
+def find_clip(folder: str | os.PathLike, clip: str) -> Path | None:
+    """The file (or image folder) of ``clip`` in ``folder``, or ``None``.
+
+    An exact file name wins; otherwise the first of :data:`VIDEO_EXTENSIONS`
+    that exists; otherwise any file whose stem is ``clip``; otherwise a folder
+    named ``clip`` (a folder of images).
+    """
+    folder = Path(folder)
+    exact = folder / clip
+    if exact.is_file():
+        return exact
+    for ext in VIDEO_EXTENSIONS:
+        cand = folder / f"{clip}{ext}"
+        if cand.exists():
+            return cand
+    for cand in sorted(folder.glob(f"{glob_escape(clip)}.*")):
+        if cand.is_file() and cand.stem == clip and not cand.name.endswith((".csv", ".md", ".json", ".txt")):
+            return cand
+    if exact.is_dir():
+        return exact
+    return None
+
+
+def glob_escape(name: str) -> str:
+    """Escape glob metacharacters in a file name."""
+    import glob
+
+    return glob.escape(name)
+
+
+def frame_count(path: Path) -> int | None:
+    """The clip's frame count as the container reports it, or ``None`` if unknown/unreadable."""
+    from ..frames import open_source
+
+    try:
+        return open_source(path).n_frames
+    except InputError:
+        return None
+
+
+def validate_dataset(labels: Iterable[ClipLabel], folder: str | os.PathLike,
+                     labels_path: str | os.PathLike = "labels") -> dict[str, Path]:
+    """Check every labelled clip exists in ``folder`` and its window lies inside the video.
+
+    Parameters
+    ----------
+    labels : iterable of ClipLabel
+    folder : path-like
+        The dataset folder.
+    labels_path : path-like
+        The labels file, for messages.
+
+    Returns
+    -------
+    dict of str to Path
+        Clip name -> its file.
+
+    Raises
+    ------
+    InputError
+        The folder does not exist, a row names a clip with no file in the folder,
+        or a window / contact frame lies past the video's last frame. Clips whose
+        frame count cannot be read (corrupt) are not rejected here: they become
+        error rows when the run reaches them.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(folder, "dataset folder not found")
+    lp = str(labels_path)
+    files: dict[str, Path] = {}
+    for lab in labels:
+        f = find_clip(folder, lab.clip)
+        if f is None:
+            raise InputError(lp, f"row {lab.row}: clip {lab.clip!r} has no video in {folder}")
+        files[lab.clip] = f
+        n = frame_count(f)
+        if n is None:
+            continue
+        for name, val in (("window_start", lab.window_start), ("window_end", lab.window_end),
+                          ("contact_frame", lab.contact_frame)):
+            if val is not None and val >= n:
+                raise InputError(lp, f"row {lab.row} ({lab.clip}): {name} {val} is outside the video "
+                                     f"(frames 0..{n - 1})")
+    return files

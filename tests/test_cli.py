@@ -1,0 +1,82 @@
+"""The command line: per-video traces and summaries, the demo, and user errors (exit 2)."""
+import csv
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from cdnf_ti.run import main
+from cdnf_ti.stimuli.basic import basic_stimulus
+
+
+@pytest.fixture
+def looming_npy(tmp_path):
+    s = basic_stimulus("dark_looming", height=64, width=64, start_half_size=1.5)
+    path = tmp_path / "looming.npy"
+    np.save(path, np.stack(list(s.frames())))
+    return path
+
+
+def test_video_run_writes_a_trace_csv_per_video(looming_npy, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main([str(looming_npy), "--out", str(out)]) == 0
+    rows = list(csv.DictReader(open(out / "looming.cdnf.csv")))
+    assert len(rows) == 46
+    assert {"frame", "I_v", "spike", "iterations_on", "iterations_off", "iterations_sum",
+            "residual_on", "residual_off", "residual_sum"} <= set(rows[0])
+    assert float(rows[0]["I_v"]) == 0.5
+
+
+def test_video_run_prints_one_summary_line_per_video(looming_npy, tmp_path, capsys):
+    main([str(looming_npy), "--out", str(tmp_path / "o")])
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.strip()]
+    assert len(lines) == 1
+    assert "46 frames" in lines[0] and "first alert" in lines[0] and "max I_v" in lines[0] and "fps" in lines[0]
+
+
+def test_missing_input_gives_one_line_error_and_exit_code_2(tmp_path, capsys):
+    code = main([str(tmp_path / "missing.mp4"), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert err == [f"error: {tmp_path / 'missing.mp4'}: no such file or folder"]
+
+
+def test_bad_input_does_not_stop_the_other_videos(looming_npy, tmp_path, capsys):
+    bad = tmp_path / "bad.mp4"
+    bad.write_bytes(b"\x00" * 1000)
+    code = main([str(bad), str(looming_npy), "--out", str(tmp_path / "o")])
+    assert code == 2
+    assert (tmp_path / "o" / "looming.cdnf.csv").exists()
+    assert "bad.mp4" in capsys.readouterr().err
+
+
+def test_invalid_option_value_is_a_one_line_error(looming_npy, tmp_path, capsys):
+    code = main([str(looming_npy), "--out", str(tmp_path / "o"), "--epsilon", "-1"])
+    assert code == 2
+    assert "epsilon" in capsys.readouterr().err
+
+
+def test_unknown_model_is_a_one_line_error(looming_npy, tmp_path, capsys):
+    assert main([str(looming_npy), "--model", "nosuch"]) == 2
+    assert "unknown model 'nosuch'" in capsys.readouterr().err
+
+
+def test_demo_prints_the_table1_cdnf_column(capsys):
+    assert main(["demo", "--size", "96", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    for label in ("Dark approaching", "Light approaching", "Dark receding", "Light receding",
+                  "Dark translating", "Light translating"):
+        assert label in out
+    assert "differs" not in out
+
+
+def test_module_entry_point_exits_2_without_traceback_on_bad_input(tmp_path):
+    corrupt = tmp_path / "corrupt.mp4"
+    corrupt.write_bytes(b"not a video at all" * 50)
+    proc = subprocess.run([sys.executable, "-m", "cdnf_ti.run", str(corrupt), "--out", str(tmp_path / "o")],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr
+    err_lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("error:")]
+    assert len(err_lines) == 1 and "corrupt.mp4" in err_lines[0]

@@ -1,0 +1,57 @@
+"""The shared fixed-point controller: stopping, per-field counts, damping, honesty."""
+import numpy as np
+
+from cdnf_ti.solver import solve_fixed_point
+
+
+def _affine_map(slope, fixed):
+    state = {"x": 0.0}
+
+    def iterate(lam):
+        x = state["x"]
+        f = fixed + slope * (x - fixed)
+        state["x"] = x + lam * (f - x)
+        return (abs(f - x),)
+
+    return state, iterate
+
+
+def test_contraction_converges_without_damping():
+    state, it = _affine_map(0.5, 1.0)
+    rep = solve_fixed_point(it, 1, tol=1e-8, max_iter=100)
+    assert rep.converged and rep.damping == 1.0
+    assert abs(state["x"] - 1.0) < 1e-7
+
+
+def test_oscillating_map_is_damped_until_it_converges():
+    # slope -3: plain iteration diverges; lam <= 1/2 makes it a contraction.
+    state, it = _affine_map(-3.0, 1.0)
+    rep = solve_fixed_point(it, 1, tol=1e-8, max_iter=500, stall_patience=2)
+    assert rep.converged
+    assert rep.damping < 1.0
+    assert abs(state["x"] - 1.0) < 1e-7
+
+
+def test_unconverged_solve_is_reported_not_hidden():
+    state, it = _affine_map(0.99, 1.0)
+    rep = solve_fixed_point(it, 1, tol=1e-12, max_iter=5)
+    assert not rep.converged
+    assert rep.iterations == (5,)
+    assert rep.residuals[0] > 1e-12
+
+
+def test_per_field_iteration_counts_are_recorded_separately():
+    xs = [0.0, 0.0]
+
+    def it(lam):
+        res = []
+        for i, slope in enumerate((0.1, 0.6)):
+            f = 1.0 + slope * (xs[i] - 1.0)
+            res.append(abs(f - xs[i]))
+            xs[i] += lam * (f - xs[i])
+        return tuple(res)
+
+    rep = solve_fixed_point(it, 2, tol=1e-6, max_iter=100)
+    assert rep.converged
+    assert rep.iterations[0] < rep.iterations[1]
+    assert np.allclose(xs, 1.0, atol=1e-5)
