@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from .errors import InputError
+from .taichi_runtime import BackendUnavailableError
 
 #: Subcommands: first word on the command line -> "module:function(argv) -> int".
 SUBCOMMANDS: dict[str, str] = {
@@ -131,6 +132,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_USAGE
     except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    except BackendUnavailableError as e:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:

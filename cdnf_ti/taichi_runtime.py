@@ -1,12 +1,18 @@
 """One Taichi runtime per process: initialisation and architecture selection."""
 from __future__ import annotations
 
-import os
+import contextlib
+import io
 import threading
 
 ARCHS = ("cpu", "cuda", "vulkan", "gpu")
 
 _lock = threading.Lock()
+
+
+class BackendUnavailableError(RuntimeError):
+    """The requested Taichi architecture is not available on this machine."""
+
 _arch: str | None = None
 
 
@@ -23,7 +29,7 @@ def ensure_taichi(arch: str = "cpu") -> str:
     ValueError
         Unknown ``arch``, or a different arch than the one this process
         already initialised (Taichi allows one runtime per process).
-    RuntimeError
+    BackendUnavailableError
         The requested GPU backend is not available on this machine.
     """
     global _arch
@@ -39,20 +45,22 @@ def ensure_taichi(arch: str = "cpu") -> str:
             return _arch
         import taichi as ti
 
-        ti.init(
-            arch=getattr(ti, arch),
-            default_fp=ti.f32,
-            default_ip=ti.i32,
-            offline_cache=True,
-            log_level=ti.WARN,
-        )
+        with contextlib.redirect_stdout(io.StringIO()):  # Taichi prints "[Taichi] Starting on arch=..."
+            ti.init(
+                arch=getattr(ti, arch),
+                default_fp=ti.f32,
+                default_ip=ti.i32,
+                offline_cache=True,
+                log_level=ti.WARN,
+            )
         got = ti.lang.impl.current_cfg().arch
         got_name = ti.lang.impl._ti_core.arch_name(got)
         if arch != "cpu" and got_name in ("x64", "arm64"):
             ti.reset()
-            ti.init(arch=ti.cpu, default_fp=ti.f32, offline_cache=True, log_level=ti.WARN)
+            with contextlib.redirect_stdout(io.StringIO()):
+                ti.init(arch=ti.cpu, default_fp=ti.f32, offline_cache=True, log_level=ti.WARN)
             _arch = "cpu"
-            raise RuntimeError(
+            raise BackendUnavailableError(
                 f"Taichi backend {arch!r} is not available on this machine "
                 "(no driver/device found); use --arch cpu"
             )
