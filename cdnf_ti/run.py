@@ -12,7 +12,9 @@ with no traceback, and exit with code 2.
 from __future__ import annotations
 
 import argparse
+import csv
 import importlib
+import io
 import sys
 import warnings
 from pathlib import Path
@@ -23,7 +25,12 @@ from .taichi_runtime import BackendUnavailableError
 
 #: Subcommands: first word on the command line -> "module:function(argv) -> int".
 SUBCOMMANDS: dict[str, str] = {
+    "bench": "cdnf_ti.bench.cli:main",
     "demo": "cdnf_ti.demo:main",
+    "generate": "cdnf_ti.generate:generate_main",
+    "rain": "cdnf_ti.generate:rain_main",
+    "dataset": "cdnf_ti.experiments.cli:dataset_main",
+    "experiment": "cdnf_ti.experiments.cli:experiment_main",
 }
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
@@ -58,18 +65,26 @@ def _videos_parser() -> argparse.ArgumentParser:
                     "With no arguments: the built-in demo (paper Table I). "
                     f"Subcommands: {', '.join(SUBCOMMANDS)} (e.g. 'python -m cdnf_ti.run demo --help').",
     )
-    ap.add_argument("inputs", nargs="+", metavar="VIDEO", help="video file, folder of images, or .npy array")
+    ap.add_argument("inputs", nargs="+", metavar="VIDEO",
+                    help="video file, folder of images, .npy array, or a generated stimulus "
+                         "'stim:NAME[?coherence=C&seed=S&size=N...]' (see cdnf_ti.inputs)")
     ap.add_argument("--out", default="cdnf_out", help="output folder for traces (default: %(default)s)")
     add_model_options(ap)
     ap.add_argument("--epsilon", type=float, default=None, help="C-DNF alert margin (default 0.006)")
     ap.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    ap.add_argument("--rain", action="store_true",
+                    help="add synthetic rain (paper defaults) in memory; prints each video's SNR")
+    ap.add_argument("--rain-seed", type=int, default=0, help="rain seed (default: %(default)s)")
+    ap.add_argument("--rain-drops", type=int, default=None,
+                    help="rain droplets per frame (default: 500 per 426x240, scaled by area)")
     return ap
 
 
 def run_videos(argv: Sequence[str]) -> int:
     """Run models over each input, write ``OUT/<clip>.<model>.csv`` and print one line each."""
     from .atomic import atomic_write_text
-    from .frames import iter_grey, open_source
+    from .frames import iter_grey
+    from .inputs import resolve_input
     from .models import create_model
     from .params import CDNFParams
 
@@ -77,14 +92,22 @@ def run_videos(argv: Sequence[str]) -> int:
     models = parse_models(args.models)
     out = Path(args.out)
     failed = 0
-    summary_rows = ["clip,model,frames,first_alert,max_output,fps,status"]
+    rain_params = None
+    if args.rain:
+        from .stimuli.rain import RainParams, RainyFrames
+
+        rain_params = RainParams(drops=args.rain_drops)
+    columns = ["clip", "model", "frames", "first_alert", "max_output", "fps", "status"]
+    if args.rain:
+        columns.append("rain_snr_db")
+    summary: list[dict] = []
     for path in args.inputs:
         try:
-            src = open_source(path)
+            src = resolve_input(path)
         except InputError as e:
             print(f"error: {e}", file=sys.stderr)
             failed += 1
-            summary_rows.append(f"{Path(path).stem},,,,,,error: {e.problem}")
+            summary.append({"clip": Path(path).stem, "status": f"error: {e.problem}"})
             continue
         for name in models:
             params = None
@@ -94,23 +117,36 @@ def run_videos(argv: Sequence[str]) -> int:
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    trace = model.run(iter_grey(src), progress=False if args.no_progress else f"{src.name} [{name}]",
+                    frames = iter_grey(src)
+                    rain = None
+                    if rain_params is not None:
+                        rain = RainyFrames(frames, rain_params, seed=args.rain_seed)
+                        frames = iter(rain)
+                    trace = model.run(frames, progress=False if args.no_progress else f"{src.name} [{name}]",
                                       total=src.n_frames)
             except InputError as e:
                 print(f"error: {e}", file=sys.stderr)
                 failed += 1
-                summary_rows.append(f"{src.name},{name},,,,,error: {e.problem}")
+                summary.append({"clip": src.name, "model": name, "status": f"error: {e.problem}"})
                 break
             trace.to_csv(out / f"{src.name}.{name}.csv")
             fa = trace.first_alert
             fa_txt = f"{fa} ({fa / src.fps:.2f} s)" if fa is not None else "none"
             unconv = int((~trace.converged).sum())
             note = f", {unconv} frames NOT converged" if unconv else ""
+            if rain is not None:
+                note += f", rain SNR {rain.snr_db:.2f} dB"
             print(f"{path} [{name}]: {trace.n_frames} frames, first alert {fa_txt}, "
                   f"max {trace.output_name} {trace.output.max():.4f}, {trace.fps:.1f} fps{note}")
-            summary_rows.append(f"{src.name},{name},{trace.n_frames},{'' if fa is None else fa},"
-                                f"{trace.output.max():.6f},{trace.fps:.2f},{'ok' if not unconv else 'unconverged'}")
-    atomic_write_text(out / "summary.csv", "\n".join(summary_rows) + "\n")
+            summary.append({"clip": src.name, "model": name, "frames": trace.n_frames,
+                            "first_alert": "" if fa is None else fa, "max_output": f"{trace.output.max():.6f}",
+                            "fps": f"{trace.fps:.2f}", "status": "ok" if not unconv else "unconverged",
+                            "rain_snr_db": f"{rain.snr_db:.4f}" if rain is not None else ""})
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore", lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(summary)
+    atomic_write_text(out / "summary.csv", buf.getvalue())
     return EXIT_USAGE if failed else EXIT_OK
 
 

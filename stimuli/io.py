@@ -1,0 +1,163 @@
+"""Lossless stimulus files: FFV1 AVI or a PNG folder, plus a JSON sidecar.
+
+Frames (float in [0, 1] or uint8, grey) are stored as 8-bit grey:
+``uint8 = round(255 x)``. FFV1 and PNG are lossless, so reading a file back
+gives exactly those 8-bit frames (binary stimuli come back exactly).
+
+The sidecar (:func:`sidecar_path`) records every parameter and the seed; it is
+written after the frames, both atomically.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any, Iterable, Iterator
+
+import cv2
+import numpy as np
+
+from ..atomic import atomic_write, atomic_write_json
+from ..errors import InputError
+
+FORMATS = ("avi", "png")
+
+
+def output_format(path: str | os.PathLike) -> str:
+    """``"avi"`` for a ``.avi`` path, ``"png"`` (a folder of PNG frames) for a path with no suffix."""
+    suffix = Path(path).suffix.lower()
+    if suffix == ".avi":
+        return "avi"
+    if suffix == "":
+        return "png"
+    raise ValueError(f"{path}: output must be a .avi file (FFV1, lossless) or a folder name (PNG frames)")
+
+
+def sidecar_path(path: str | os.PathLike) -> Path:
+    """``clip.avi`` -> ``clip.json``; PNG folder ``clip`` -> ``clip/sidecar.json``."""
+    p = Path(path)
+    return p.with_suffix(".json") if output_format(p) == "avi" else p / "sidecar.json"
+
+
+def to_uint8(frame: np.ndarray) -> np.ndarray:
+    """Grey frame (float in [0, 1] or uint8) -> uint8 ``round(255 x)``."""
+    a = np.asarray(frame)
+    if a.dtype == np.uint8:
+        return np.ascontiguousarray(a)
+    return np.clip(np.rint(a.astype(np.float64) * 255.0), 0, 255).astype(np.uint8)
+
+
+def write_frames(frames: Iterable[np.ndarray], path: str | os.PathLike, fps: float = 30.0,
+                 progress: bool | str = False, total: int | None = None) -> int:
+    """Stream grey frames to a lossless file and return the frame count.
+
+    Parameters
+    ----------
+    frames : iterable of ndarray, each (H, W)
+        float in [0, 1] or uint8; consumed one at a time.
+    path : path
+        ``*.avi`` (FFV1) or a folder name (PNG frames ``000000.png`` ...). An
+        existing output is replaced only once the new one is complete.
+    fps : float
+        Frame rate stored in the AVI.
+    progress : bool or str
+        tqdm progress bar (label when a string); silent when not a TTY.
+    """
+    fmt = output_format(path)
+    path = Path(path)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=total, desc=progress if isinstance(progress, str) else path.name, unit="frame",
+                   leave=False, disable=None)
+    count = 0
+    try:
+        if fmt == "avi":
+            def write(tmp: str) -> None:
+                nonlocal count
+                writer = None
+                try:
+                    for f in frames:
+                        g = to_uint8(f)
+                        if writer is None:
+                            writer = cv2.VideoWriter(tmp, cv2.VideoWriter_fourcc(*"FFV1"), float(fps),
+                                                     (g.shape[1], g.shape[0]), isColor=False)
+                            if not writer.isOpened():
+                                raise InputError(path, "cannot open an FFV1 AVI writer (OpenCV without FFV1?); "
+                                                       "give a folder name for PNG frames instead")
+                            shape = g.shape
+                        if g.shape != shape:
+                            raise ValueError(f"{path}: frame {count} has shape {g.shape}, expected {shape}")
+                        writer.write(g)
+                        count += 1
+                        if bar is not None:
+                            bar.update(1)
+                finally:
+                    if writer is not None:
+                        writer.release()
+                if count == 0:
+                    raise ValueError(f"{path}: no frames to write")
+
+            atomic_write(path, write)
+        else:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+            try:
+                for f in frames:
+                    g = to_uint8(f)
+                    if not cv2.imwrite(str(tmp / f"{count:06d}.png"), g):
+                        raise InputError(path, f"cannot write PNG frame {count}")
+                    count += 1
+                    if bar is not None:
+                        bar.update(1)
+                if count == 0:
+                    raise ValueError(f"{path}: no frames to write")
+                if path.exists():
+                    if not path.is_dir():
+                        raise InputError(path, "exists and is not a folder")
+                    shutil.rmtree(path)
+                os.replace(tmp, path)
+            except BaseException:
+                shutil.rmtree(tmp, ignore_errors=True)
+                raise
+    finally:
+        if bar is not None:
+            bar.close()
+    return count
+
+
+def write_sidecar(path: str | os.PathLike, meta: dict[str, Any]) -> Path:
+    """Write ``meta`` as the JSON sidecar of output ``path`` (atomically); return its path."""
+    sp = sidecar_path(path)
+    atomic_write_json(sp, meta)
+    return sp
+
+
+def read_sidecar(path: str | os.PathLike) -> dict[str, Any]:
+    """Read the JSON sidecar of output ``path``."""
+    sp = sidecar_path(path)
+    try:
+        return json.loads(Path(sp).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(sp, "no such sidecar file") from None
+    except json.JSONDecodeError as e:
+        raise InputError(sp, f"not valid JSON ({e.msg} at line {e.lineno})") from None
+
+
+def read_frames(path: str | os.PathLike) -> Iterator[np.ndarray]:
+    """Yield the frames of a written file as float32 (H, W) in [0, 1] (``uint8 / 255``)."""
+    from ..frames import iter_grey, open_source
+
+    for g in iter_grey(open_source(path)):
+        yield g.astype(np.float32) / np.float32(255.0) if g.dtype == np.uint8 else g
+
+
+def read_frames_uint8(path: str | os.PathLike) -> Iterator[np.ndarray]:
+    """Yield the frames of a written file as stored: uint8 (H, W)."""
+    from ..frames import iter_grey, open_source
+
+    for g in iter_grey(open_source(path)):
+        yield to_uint8(g)
