@@ -5,6 +5,10 @@ from typing import Any
 
 from .base import Model, NotConvergedWarning, StepResult, Trace
 from .cdnf import CDNF
+from .flgmd import FLGMDONn, FLGMDParams
+from .lgmd1 import LGMD1, LGMD1Params
+from .lgmd2 import LGMD2, LGMD2Params
+from .sdnf import SDNF, SDNFParams
 
 MODELS: dict[str, type[Model]] = {}
 
@@ -32,6 +36,11 @@ def create_model(name: str, params: Any = None, **kwargs: Any) -> Model:
 
 
 register_model(CDNF)
+register_model(SDNF)
+register_model(LGMD2)
+register_model(FLGMDONn)
+register_model(LGMD1)
 
 __all__ = ["MODELS", "Model", "StepResult", "Trace", "NotConvergedWarning", "CDNF",
-           "register_model", "get_model_class", "create_model"]
+           "register_model", "get_model_class", "create_model",
+           "LGMD2", "LGMD2Params", "LGMD1", "LGMD1Params", "SDNF", "SDNFParams", "FLGMDONn", "FLGMDParams"]

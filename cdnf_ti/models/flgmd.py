@@ -1,0 +1,196 @@
+"""F-LGMD ONn: an LGMD with instantaneous negative feedback on the ON channel.
+
+**RECONSTRUCTION.** The equations of Chang et al., "A look into feedback
+neural computation upon collision selectivity" (Neural Networks 166:22-37,
+2023) are not publicly reachable. This model is built from the published
+mechanisms listed in ``shared/spec/BASELINES.md`` and is NOT the authors'
+model; every value marked "own choice" below is ours, chosen before looking
+at any result and not tuned to the C-DNF paper's Table I.
+
+Published facts used:
+
+* an LGMD network with ON/OFF channels as LGMD1 (:mod:`cdnf_ti.models.lgmd1`):
+  ON/OFF half-wave rectification with residue, delayed 3x3 lateral spread
+  (centre 0, edge 0.25, diagonal 0.125; delays 30/60 ms), FFI, sum threshold
+  ``T_s = 30``, grouping, ``K = sigmoid(sum G / N)``, SFA (0.005, 500 ms),
+  spikes (0.78, count >= 8);
+* the channel outputs are fed back *instantly* into their starting neurons,
+  forming a fixed point per frame; the feedback coefficient must make the map
+  a contraction (fixed-point theorem);
+* "ONn" = negative feedback on the ON channel (none on OFF);
+* excitation is processed with Gaussian kernels.
+
+The reconstruction, per frame (grey levels 0..255, ``dt = 1000 // fps``):
+
+* drives ``ON0 = P [P >= 0.1] + 0.1 ON(t-1)``, ``OFF0 = |P| [P < 0.1] + 0.1 OFF(t-1)``
+  (``ON(t-1)`` the previous frame's settled channel);
+* local summation of a channel ``X``:
+  ``S_X(X) = [G_e (*) X - w_i sum_ij K(i,j) (a_ij X + (1 - a_ij) X(t-1))]+``,
+  ``G_e`` the 3x3 normalised Gaussian with ``sigma_e = 1`` px (own choice),
+  ``w_i = 0.5`` for both channels (LGMD1's ON value; for OFF an own choice:
+  the OFF channel uses the same excitation/inhibition layout as ON, unlike
+  LGMD1's swapped OFF layout, so that the Gaussian excitation applies to both);
+* instantaneous feedback: ``X = [X0 + beta_X S_X(X)]+``, solved by relaxed
+  fixed-point iteration to ``tol`` (:func:`cdnf_ti.solver.solve_fixed_point`),
+  ``beta_on = -0.5`` (own choice, negative = ONn), ``beta_off = 0``;
+  contraction is guaranteed when
+  ``|beta| (sum G_e + w_i sum K) < 1`` (checked: 0.5 x 1.75 = 0.875);
+* ``S = S_on + S_off`` at the fixed point, kept where ``>= 30``; then as LGMD1.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from ..params import contrast_kernel
+from ..solver import solve_fixed_point
+from .lgmd1 import LGMD1
+from .lgmd2 import TaichiLGMDBackend, _checks
+
+
+@dataclass(frozen=True)
+class FLGMDParams:
+    """F-LGMD ONn parameters (RECONSTRUCTION; see the module docstring).
+
+    Attributes
+    ----------
+    beta_on, beta_off : float
+        Instantaneous feedback coefficients of the ON and OFF channels
+        (-0.5 and 0; own choices within the contraction bound).
+    sigma_e : float
+        Spread of the 3x3 normalised Gaussian excitation (px, 1.0; own choice).
+    w_i_on, w_i_off : float
+        Inhibition weights (0.5, LGMD1's ON value; OFF: own choice).
+    tau_ffi, t_ffi, clip, dc, k_lateral, tau_lateral, t_s, c_sig,
+    tau_sfa, t_sfa, kh_floor, t_sp, c_sp, n_ts :
+        As :class:`~cdnf_ti.models.lgmd1.LGMD1Params`.
+    tol : float
+        Fixed-point tolerance on ``max |T(X) - X|`` (grey levels, 1e-3; own choice).
+    max_iter : int
+        Iteration cap per frame (100).
+    damping, min_damping, stall_patience :
+        Relaxation schedule of :func:`cdnf_ti.solver.solve_fixed_point`.
+    """
+
+    beta_on: float = -0.5
+    beta_off: float = 0.0
+    sigma_e: float = 1.0
+    w_i_on: float = 0.5
+    w_i_off: float = 0.5
+    tau_ffi: float = 90.0
+    t_ffi: float = 8.0
+    clip: float = 0.1
+    dc: float = 0.1
+    k_lateral: tuple[float, float] = (0.25, 0.125)
+    tau_lateral: tuple[float, float] = (30.0, 60.0)
+    t_s: float = 30.0
+    c_sig: float = 1.0
+    tau_sfa: float = 500.0
+    t_sfa: float = 0.005
+    kh_floor: float = 0.5
+    t_sp: float = 0.78
+    c_sp: float = 4.0
+    n_ts: int = 8
+    tol: float = 1e-3
+    max_iter: int = 100
+    damping: float = 1.0
+    min_damping: float = 1.0 / 16.0
+    stall_patience: int = 4
+
+    def __post_init__(self) -> None:
+        _checks("FLGMDParams", [
+            (self.sigma_e > 0, f"sigma_e must be > 0, got {self.sigma_e}"),
+            (self.w_i_on >= 0 and self.w_i_off >= 0, "w_i_on/w_i_off must be >= 0"),
+            (len(self.k_lateral) == 2 and len(self.tau_lateral) == 2,
+             "k_lateral/tau_lateral must be (edge, diagonal)"),
+            (all(k >= 0 for k in self.k_lateral), "k_lateral weights must be >= 0"),
+            (all(t >= 0 for t in self.tau_lateral), "tau_lateral must be >= 0 ms"),
+            (self.contraction("on") < 1.0,
+             f"beta_on={self.beta_on} breaks the contraction bound |beta| (1 + w_i sum K) < 1 "
+             f"(got {self.contraction('on'):.3f}); the feedback fixed point is not guaranteed"),
+            (self.contraction("off") < 1.0,
+             f"beta_off={self.beta_off} breaks the contraction bound |beta| (1 + w_i sum K) < 1 "
+             f"(got {self.contraction('off'):.3f}); the feedback fixed point is not guaranteed"),
+            (0 <= self.dc < 1, f"dc must be in [0, 1), got {self.dc}"),
+            (self.c_sig > 0, f"c_sig must be > 0, got {self.c_sig}"),
+            (self.tau_sfa > 0, f"tau_sfa must be > 0 ms, got {self.tau_sfa}"),
+            (self.tol > 0, f"tol must be > 0, got {self.tol}"),
+            (int(self.max_iter) == self.max_iter and self.max_iter >= 1, "max_iter must be a positive integer"),
+            (0 < self.min_damping <= self.damping <= 1, "need 0 < min_damping <= damping <= 1"),
+            (int(self.n_ts) == self.n_ts and self.n_ts >= 1, f"n_ts must be a positive integer, got {self.n_ts}"),
+        ])
+
+    def contraction(self, channel: str = "on") -> float:
+        """Upper bound of the feedback map's Lipschitz constant (sup norm), any fps.
+
+        ``|beta| (sum G_e + w_i sum K)`` with ``sum G_e = 1`` and the delay
+        mixing coefficients bounded by 1.
+        """
+        beta, w = (self.beta_on, self.w_i_on) if channel == "on" else (self.beta_off, self.w_i_off)
+        return abs(beta) * (1.0 + w * 4.0 * (abs(self.k_lateral[0]) + abs(self.k_lateral[1])))
+
+    def excitation_kernel(self) -> np.ndarray:
+        """The 3x3 normalised Gaussian ``G_e``, shape (3, 3)."""
+        return contrast_kernel(self.sigma_e)
+
+    def replace(self, **changes: Any) -> "FLGMDParams":
+        return replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+class FLGMDONn(LGMD1):
+    """F-LGMD ONn (after Chang et al. 2023) -- a documented RECONSTRUCTION.
+
+    See the module docstring for the equations and which parameter values
+    are our own choices.
+
+    Parameters
+    ----------
+    params : FLGMDParams, optional
+    backend : {"taichi", "numpy"}
+    arch : str
+    fps : float
+
+    Notes
+    -----
+    ``output`` is ``K``; ``spike`` the collision alert (count >= 8);
+    ``converged`` is False when the feedback fixed point missed ``tol``.
+    Diagnostics: ``Kh, n, count, FFI, held, sum_G, iterations,
+    residual_on, residual_off``. :meth:`fields`: ``P, ON, OFF, S_on, S_off, S, G``.
+    """
+
+    name = "flgmd_onn"
+    params_type = FLGMDParams
+    description = ("F-LGMD ONn (after Chang et al. 2023): LGMD with instant negative ON feedback "
+                   "solved as a fixed point -- RECONSTRUCTION")
+
+    def _make_backend(self, shape: tuple[int, int]) -> Any:
+        if self.backend_name == "taichi":
+            return TaichiLGMDBackend(self.params, shape, self.dt, "flgmd", self.arch)
+        from ..baselines_reference import NumpyFLGMDBackend
+
+        return NumpyFLGMDBackend(self.params, shape, self.dt)
+
+    def _diag0(self) -> dict[str, float]:
+        d = super()._diag0()
+        d.update(iterations=0, residual_on=0.0, residual_off=0.0)
+        return d
+
+    def _held_diag(self) -> dict[str, float]:
+        return dict(iterations=0, residual_on=0.0, residual_off=0.0)
+
+    def _run_layers(self) -> tuple[float, dict[str, float], bool]:
+        p = self.params
+        be = self._be
+        be.prepare()
+        rep = solve_fixed_point(be.feedback_iterate, 2, tol=p.tol, max_iter=p.max_iter, damping=p.damping,
+                                min_damping=p.min_damping, stall_patience=p.stall_patience)
+        if not rep.converged:
+            self._unconverged += 1
+        sum_g = be.finish()
+        extra = dict(iterations=max(rep.iterations), residual_on=rep.residuals[0], residual_off=rep.residuals[1])
+        return sum_g, extra, rep.converged

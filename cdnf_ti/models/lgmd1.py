@@ -1,0 +1,170 @@
+"""LGMD1 with ON/OFF pathways and spike frequency adaptation (Fu, Hu, Peng, Yue,
+Neural Networks 106:127-143, 2018).
+
+Equations and defaults: ``shared/spec/BASELINES.md``, gathered from the same
+authors' general LGMD code (``LGMDs.cs``). Differences from LGMD2
+(:mod:`cdnf_ti.models.lgmd2`):
+
+* feed-forward inhibition ``FFI(t) = a mean|P| + (1 - a) FFI(t-1)``,
+  ``a = dt / (dt + 90)``; when ``FFI >= 8`` the frame is held at rest
+  (``K = 0.5``, ``Kh = 0.5``, so no spike and the count resets) and the
+  per-pixel layers are not computed (ON/OFF keep their previous values);
+* ``S_on = ON - 0.5 I_on``, ``I_on`` the delayed 3x3 spread of ON
+  (centre 0, edge 0.25, diagonal 0.125; delays 30 ms edge, 60 ms diagonal);
+* ``S_off = E_off - 1.0 OFF``, ``E_off`` the same delayed spread of OFF;
+* ``S = S_on + S_off`` kept only where ``S >= 30``; ``G = S (*) ones/9``;
+  ``K = sigmoid(sum G / N)``;
+* SFA as LGMD2 with threshold 0.005 and ``tau = 500`` ms; spikes as LGMD2
+  (``T_sp = 0.78``, alert while the count ``>= 8``).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from .base import StepResult
+from .lgmd2 import LGMDFamily, TaichiLGMDBackend, _checks, lowpass_coefficient, sfa_step
+
+
+@dataclass(frozen=True)
+class LGMD1Params:
+    """LGMD1 parameters (defaults: BASELINES.md / the authors' ``LGMDs.cs``).
+
+    Attributes
+    ----------
+    tau_ffi : float
+        FFI low-pass time constant (ms, 90).
+    t_ffi : float
+        FFI threshold (grey levels, 8): at or above it the frame is held at rest.
+    clip, dc : float
+        ON/OFF clip point (0.1 grey levels) and residue (0.1).
+    k_lateral : (edge, diagonal)
+        Delayed 3x3 spread weights, centre 0 ((0.25, 0.125)).
+    tau_lateral : (edge, diagonal)
+        Their delays (ms, (30, 60)).
+    w_i_on, w_i_off : float
+        ``S_on = ON - w_i_on I_on`` (0.5); ``S_off = E_off - w_i_off OFF`` (1.0).
+    w_on_exc, w_off_exc, w_onoff : float
+        ``S = w_on_exc S_on + w_off_exc S_off + w_onoff S_on S_off`` (1, 1, 0).
+    t_s : float
+        S cells below this are zeroed (grey levels, 30).
+    c_sig : float
+        ``K = sigmoid(sum G / (N c_sig))`` (1).
+    tau_sfa, t_sfa, kh_floor : float
+        SFA time constant (ms, 500), threshold (0.005) and floor (0.5).
+    t_sp, c_sp : float
+        Spiking threshold (0.78) and scale (4).
+    n_ts : int
+        Collision alert while the spike count is at least this (8).
+    """
+
+    tau_ffi: float = 90.0
+    t_ffi: float = 8.0
+    clip: float = 0.1
+    dc: float = 0.1
+    k_lateral: tuple[float, float] = (0.25, 0.125)
+    tau_lateral: tuple[float, float] = (30.0, 60.0)
+    w_i_on: float = 0.5
+    w_i_off: float = 1.0
+    w_on_exc: float = 1.0
+    w_off_exc: float = 1.0
+    w_onoff: float = 0.0
+    t_s: float = 30.0
+    c_sig: float = 1.0
+    tau_sfa: float = 500.0
+    t_sfa: float = 0.005
+    kh_floor: float = 0.5
+    t_sp: float = 0.78
+    c_sp: float = 4.0
+    n_ts: int = 8
+
+    def __post_init__(self) -> None:
+        _checks("LGMD1Params", [
+            (self.tau_ffi >= 0, f"tau_ffi must be >= 0 ms, got {self.tau_ffi}"),
+            (self.t_ffi > 0, f"t_ffi must be > 0, got {self.t_ffi}"),
+            (len(self.k_lateral) == 2 and len(self.tau_lateral) == 2,
+             "k_lateral/tau_lateral must be (edge, diagonal)"),
+            (all(t >= 0 for t in self.tau_lateral), "tau_lateral must be >= 0 ms"),
+            (0 <= self.dc < 1, f"dc must be in [0, 1), got {self.dc}"),
+            (self.c_sig > 0, f"c_sig must be > 0, got {self.c_sig}"),
+            (self.tau_sfa > 0, f"tau_sfa must be > 0 ms, got {self.tau_sfa}"),
+            (int(self.n_ts) == self.n_ts and self.n_ts >= 1, f"n_ts must be a positive integer, got {self.n_ts}"),
+        ])
+
+    def replace(self, **changes: Any) -> "LGMD1Params":
+        return replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+class LGMD1(LGMDFamily):
+    """LGMD1 with ON/OFF pathways and SFA (Fu et al. 2018).
+
+    Parameters
+    ----------
+    params : LGMD1Params, optional
+    backend : {"taichi", "numpy"}
+    arch : str
+    fps : float
+        Input frame rate; ``dt = 1000 // fps`` ms.
+
+    Notes
+    -----
+    ``output`` is ``K``; ``spike`` the collision alert (count >= 8).
+    Diagnostics: ``Kh, n, count, FFI, held, sum_G``. :meth:`fields`:
+    ``P, ON, OFF, I_on, E_off, S, G``.
+    """
+
+    name = "lgmd1"
+    params_type = LGMD1Params
+    description = "LGMD1 with ON/OFF pathways and SFA (Fu et al. 2018); equations from the authors' code"
+
+    def _make_backend(self, shape: tuple[int, int]) -> Any:
+        if self.backend_name == "taichi":
+            return TaichiLGMDBackend(self.params, shape, self.dt, "lgmd1", self.arch)
+        from ..baselines_reference import NumpyLGMD1Backend
+
+        return NumpyLGMD1Backend(self.params, shape, self.dt)
+
+    def step(self, frame: np.ndarray) -> StepResult:
+        p = self.params
+        grey = self._frame(frame)
+        be = self._be
+        t = self._t
+        self._t += 1
+        sum_p = be.load(grey, t == 0)
+        if t == 0:
+            return StepResult(t, 0.5, False, True, self._diag0())
+        n_cells = grey.shape[0] * grey.shape[1]
+        a = lowpass_coefficient(self.dt, p.tau_ffi)
+        self.pm = a * (sum_p / n_cells) + (1.0 - a) * self.pm
+        held = self.pm >= p.t_ffi
+        extra: dict[str, float] = self._held_diag() if held else {}
+        converged = True
+        if held:
+            # held at rest; the per-pixel layers are not computed (ON/OFF keep their values)
+            k, kh, sum_g = 0.5, p.kh_floor, 0.0
+        else:
+            sum_g, extra, converged = self._run_layers()
+            k = 1.0 / (1.0 + math.exp(-sum_g / (n_cells * p.c_sig)))
+            a_s = p.tau_sfa / (p.tau_sfa + self.dt)
+            kh = sfa_step(self.kh_prev, self.k_prev, k, p.t_sfa, a_s, p.kh_floor)
+        self.k_prev, self.kh_prev = k, kh
+        n, alert = self._spikes(kh)
+        diag = dict(Kh=kh, n=n, count=self.count, FFI=self.pm, held=int(held), sum_G=sum_g, **extra)
+        return StepResult(t, k, alert, converged, diag)
+
+    def _diag0(self) -> dict[str, float]:
+        return dict(Kh=self.params.kh_floor, n=0, count=0, FFI=0.0, held=0, sum_G=0.0)
+
+    def _held_diag(self) -> dict[str, float]:
+        """Extra diagnostics of a held frame (none for LGMD1)."""
+        return {}
+
+    def _run_layers(self) -> tuple[float, dict[str, float], bool]:
+        """Per-pixel stages of one frame: ``(sum G, extra diagnostics, converged)``."""
+        return self._be.layers(), {}, True

@@ -1,0 +1,422 @@
+"""LGMD2 (Fu, Hu, Peng, Rind, Yue, IEEE Trans. Cybernetics 50(12):5074-5088, 2020).
+
+Equations and defaults: ``shared/spec/BASELINES.md``, gathered from the
+authors' public C# supplement (``lgmd2OpenSource.cs``). Per frame, with
+``dt = 1000 // fps`` ms (integer: 33 at 30 fps) and grey levels in 0..255:
+
+1. ``P = L(t) - L(t-1)``; ``PM(t) = a PM_raw + (1 - a) PM(t-1)``,
+   ``PM_raw = mean |P|``, ``a = dt / (dt + tau_PM)``;
+   ``w_on = max(PM / T_pm, 1)``, ``w_off = max(PM / T_pm, 0.5)``.
+2. ``ON = P [P >= 0.1] + 0.1 ON(t-1)``; ``OFF = |P| [P < 0.1] + 0.1 OFF(t-1)``.
+3. ``I(x, y) = sum_ij K(i, j) [a_ij X(x+i, y+j, t) + (1 - a_ij) X(x+i, y+j, t-1)]``,
+   ``a_ij = dt / (dt + tau_ij)``, centre included.
+4. ``S = S_on + S_off + S_on S_off``, ``S_on = [ON - w_on I_on]+``, ``S_off = [OFF - w_off I_off]+``.
+5. ``Ce = S (*) ones/9``; ``omega = 0.01 + max|Ce| / 4``; ``G = S Ce / omega``, 0 unless ``0.5 G >= 15``.
+6. ``K = 1 / (1 + exp(-sum G / N))``.
+7. SFA: ``Kh = a_s (Kh(t-1) + K - K(t-1))`` if ``K - K(t-1) <= 0.003`` else ``a_s K``,
+   ``a_s = tau_s / (tau_s + dt)``; ``Kh = max(Kh, 0.5)``.
+8. ``n(t) = floor(exp(4 (Kh - 0.78)))``; the count adds ``n`` and resets to 0 on
+   any frame with ``n = 0``; collision alert while the count ``>= 8``.
+
+Frame 0 only initialises ``L``: the state stays at zero (as the C# code's
+first call sees zeros for every previous value), the output is ``K = 0.5``.
+
+This module also holds what the LGMD family shares: the scalar recurrences
+(:func:`lowpass_coefficient`, :func:`sfa_step`, :func:`spike_count`) and the
+base class :class:`LGMDFamily` that runs them identically for both backends.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from ..frames import to_grey
+from .base import Model, StepResult
+
+
+def frame_interval_ms(fps: float) -> int:
+    """``dt = 1000 // fps`` in integer ms (33 at 30 fps), as the authors' code."""
+    dt = int(1000 // fps)
+    if dt < 1:
+        raise ValueError(f"fps {fps} gives a frame interval below 1 ms")
+    return dt
+
+
+def lowpass_coefficient(dt: int, tau: float) -> float:
+    """``a = dt / (dt + tau)`` of a first-order low-pass (dt, tau in ms)."""
+    return dt / (dt + tau)
+
+
+def sfa_step(kh_prev: float, k_prev: float, k: float, threshold: float, a_s: float, floor: float = 0.5) -> float:
+    """Spike frequency adaptation of the membrane potential.
+
+    Parameters
+    ----------
+    kh_prev, k_prev, k : float
+        ``Kh(t-1)``, ``K(t-1)`` and ``K(t)``.
+    threshold : float
+        ``T_sfa``: below or at this rise of K the adaptation accumulates.
+    a_s : float
+        ``tau_s / (tau_s + dt)``.
+    floor : float
+        Lower bound of the result (0.5).
+
+    Returns
+    -------
+    float
+        ``Kh(t)``.
+    """
+    d = k - k_prev
+    kh = a_s * (kh_prev + d) if d <= threshold else a_s * k
+    return max(kh, floor)
+
+
+def spike_count(kh: float, t_sp: float, c_sp: float) -> int:
+    """``n(t) = floor(exp(c_sp (Kh - t_sp)))`` spikes in this frame."""
+    return int(math.floor(math.exp(c_sp * (kh - t_sp))))
+
+
+def _checks(name: str, checks: list[tuple[bool, str]]) -> None:
+    for ok, msg in checks:
+        if not ok:
+            raise ValueError(f"{name}: {msg}")
+
+
+@dataclass(frozen=True)
+class LGMD2Params:
+    """LGMD2 parameters (defaults: BASELINES.md / the authors' C# supplement).
+
+    Attributes
+    ----------
+    tau_pm : float
+        Time constant of the PM pathway (ms, 90).
+    t_pm : float
+        PM threshold of the adaptive inhibition biases (grey levels, 8).
+    w_on_base, w_off_base : float
+        Lower bounds of the ON/OFF inhibition biases (1 and 0.5).
+    clip : float
+        Clip point of the ON/OFF rectifiers (grey levels, 0.1).
+    dc : float
+        Residue of the previous ON/OFF value (0.1).
+    k_on, k_off : (centre, edge, diagonal)
+        3x3 inhibition kernels ((2, 0.5, 0.25) and (1, 0.25, 0.125)).
+    tau_on, tau_off : (centre, edge, diagonal)
+        Delays of the inhibitions (ms, (15, 30, 45) and (60, 120, 180)).
+    w_on_exc, w_off_exc, w_onoff : float
+        Weights of ``S = w_on_exc S_on + w_off_exc S_off + w_onoff S_on S_off`` (1, 1, 1).
+    delta_c, c_w : float
+        ``omega = delta_c + max|Ce| / c_w`` (0.01, 4).
+    c_de, t_de : float
+        Grouping decay: G kept where ``c_de G >= t_de`` (0.5, 15).
+    c_sig : float
+        ``K = sigmoid(sum G / (N c_sig))`` (1).
+    tau_sfa : float
+        SFA time constant (ms, 800).
+    t_sfa : float
+        SFA threshold on the rise of K (0.003).
+    kh_floor : float
+        Lower bound of the SFA output (0.5).
+    t_sp, c_sp : float
+        Spiking ``n = floor(exp(c_sp (Kh - t_sp)))`` (0.78, 4).
+    n_ts : int
+        Collision alert while the spike count is at least this (8).
+    """
+
+    tau_pm: float = 90.0
+    t_pm: float = 8.0
+    w_on_base: float = 1.0
+    w_off_base: float = 0.5
+    clip: float = 0.1
+    dc: float = 0.1
+    k_on: tuple[float, float, float] = (2.0, 0.5, 0.25)
+    tau_on: tuple[float, float, float] = (15.0, 30.0, 45.0)
+    k_off: tuple[float, float, float] = (1.0, 0.25, 0.125)
+    tau_off: tuple[float, float, float] = (60.0, 120.0, 180.0)
+    w_on_exc: float = 1.0
+    w_off_exc: float = 1.0
+    w_onoff: float = 1.0
+    delta_c: float = 0.01
+    c_w: float = 4.0
+    c_de: float = 0.5
+    t_de: float = 15.0
+    c_sig: float = 1.0
+    tau_sfa: float = 800.0
+    t_sfa: float = 0.003
+    kh_floor: float = 0.5
+    t_sp: float = 0.78
+    c_sp: float = 4.0
+    n_ts: int = 8
+
+    def __post_init__(self) -> None:
+        _checks("LGMD2Params", [
+            (self.tau_pm >= 0, f"tau_pm must be >= 0 ms, got {self.tau_pm}"),
+            (self.t_pm > 0, f"t_pm must be > 0, got {self.t_pm}"),
+            (len(self.k_on) == 3 and len(self.k_off) == 3, "k_on/k_off must be (centre, edge, diagonal)"),
+            (len(self.tau_on) == 3 and len(self.tau_off) == 3, "tau_on/tau_off must be (centre, edge, diagonal)"),
+            (all(t >= 0 for t in (*self.tau_on, *self.tau_off)), "delays tau_on/tau_off must be >= 0 ms"),
+            (0 <= self.dc < 1, f"dc must be in [0, 1), got {self.dc}"),
+            (self.c_w > 0 and self.delta_c > 0, "c_w and delta_c must be > 0"),
+            (self.c_sig > 0, f"c_sig must be > 0, got {self.c_sig}"),
+            (self.tau_sfa > 0, f"tau_sfa must be > 0 ms, got {self.tau_sfa}"),
+            (int(self.n_ts) == self.n_ts and self.n_ts >= 1, f"n_ts must be a positive integer, got {self.n_ts}"),
+        ])
+
+    def replace(self, **changes: Any) -> "LGMD2Params":
+        return replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+class LGMDFamily(Model):
+    """Shared orchestration of the LGMD family (both backends).
+
+    Subclasses implement :meth:`_make_backend` and :meth:`_layers` (the
+    per-pixel stages, returning ``sum G`` or ``None`` for a held frame).
+    Inputs are grey levels 0..255 (uint8 as is; float in [0, 1] times 255).
+    """
+
+    output_name = "K"
+
+    def __init__(self, params: Any = None, *, backend: str = "taichi", arch: str = "cpu", fps: float = 30.0):
+        super().__init__(params, backend=backend, arch=arch, fps=fps)
+        self.dt = frame_interval_ms(self.fps)
+        self._be: Any = None
+        self._t = 0
+        if backend == "taichi":
+            from ..taichi_runtime import ensure_taichi
+
+            ensure_taichi(arch)
+        self._reset_scalars()
+
+    def _reset_scalars(self) -> None:
+        self.pm = 0.0  # PM (LGMD2) or FFI (LGMD1 family), grey levels
+        self.k_prev = 0.0
+        self.kh_prev = 0.0
+        self.count = 0
+
+    @property
+    def threshold(self) -> float | None:
+        """None: the alert is a spike count, not a level of ``K`` (``Kh``/``n`` are diagnostics)."""
+        return None
+
+    def reset(self) -> None:
+        self._t = 0
+        self._reset_scalars()
+        if self._be is not None:
+            self._be.reset()
+
+    def _frame(self, frame: np.ndarray) -> np.ndarray:
+        grey = to_grey(frame)
+        if self._be is None:
+            self._be = self._make_backend(grey.shape)
+        elif grey.shape != self._be.shape:
+            raise ValueError(f"frame {self._t} is {grey.shape[1]}x{grey.shape[0]} but this model runs at "
+                             f"{self._be.shape[1]}x{self._be.shape[0]}; call reset() on a new model")
+        return grey
+
+    def _make_backend(self, shape: tuple[int, int]) -> Any:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _spikes(self, kh: float) -> tuple[int, bool]:
+        p = self.params
+        n = spike_count(kh, p.t_sp, p.c_sp)
+        self.count = 0 if n == 0 else self.count + n
+        return n, self.count >= p.n_ts
+
+    def fields(self) -> dict[str, np.ndarray]:
+        """The model's inner layers, (H, W) each (empty before the first frame)."""
+        if self._be is None:
+            return {}
+        return {k: np.asarray(v) for k, v in self._be.fields().items()}
+
+
+class LGMD2(LGMDFamily):
+    """LGMD2 collision-perception network (Fu et al. 2020), selective to darker looming objects.
+
+    Parameters
+    ----------
+    params : LGMD2Params, optional
+    backend : {"taichi", "numpy"}
+        Taichi kernels (float32 layers) or the NumPy float64 reference.
+    arch : str
+        Taichi architecture.
+    fps : float
+        Input frame rate; ``dt = 1000 // fps`` ms.
+
+    Notes
+    -----
+    ``output`` is ``K`` (sigmoid membrane potential); ``spike`` is the
+    collision alert (spike count >= 8). Diagnostics per frame: ``Kh``
+    (after SFA), ``n`` (spikes), ``count``, ``PM``, ``w_on``, ``w_off``,
+    ``sum_G``, ``max_Ce``. :meth:`fields`: ``P, ON, OFF, I_on, I_off, S, Ce, G``.
+    """
+
+    name = "lgmd2"
+    params_type = LGMD2Params
+    description = "LGMD2 (Fu et al. 2020): biased ON/OFF, adaptive inhibition, SFA; equations from the authors' code"
+
+    def _make_backend(self, shape: tuple[int, int]) -> Any:
+        if self.backend_name == "taichi":
+            return TaichiLGMDBackend(self.params, shape, self.dt, "lgmd2", self.arch)
+        from ..baselines_reference import NumpyLGMD2Backend
+
+        return NumpyLGMD2Backend(self.params, shape, self.dt)
+
+    def step(self, frame: np.ndarray) -> StepResult:
+        p = self.params
+        grey = self._frame(frame)
+        be = self._be
+        t = self._t
+        self._t += 1
+        sum_p = be.load(grey, t == 0)
+        if t == 0:
+            return StepResult(t, 0.5, False, True, dict(Kh=p.kh_floor, n=0, count=0, PM=0.0,
+                                                        w_on=p.w_on_base, w_off=p.w_off_base,
+                                                        sum_G=0.0, max_Ce=0.0))
+        n_cells = grey.shape[0] * grey.shape[1]
+        a = lowpass_coefficient(self.dt, p.tau_pm)
+        self.pm = a * (sum_p / n_cells) + (1.0 - a) * self.pm
+        w_on = max(self.pm / p.t_pm, p.w_on_base)
+        w_off = max(self.pm / p.t_pm, p.w_off_base)
+        sum_g, max_ce = be.layers(w_on, w_off)
+        k = 1.0 / (1.0 + math.exp(-sum_g / (n_cells * p.c_sig)))
+        a_s = p.tau_sfa / (p.tau_sfa + self.dt)
+        kh = sfa_step(self.kh_prev, self.k_prev, k, p.t_sfa, a_s, p.kh_floor)
+        self.k_prev, self.kh_prev = k, kh
+        n, alert = self._spikes(kh)
+        diag = dict(Kh=kh, n=n, count=self.count, PM=self.pm, w_on=w_on, w_off=w_off,
+                    sum_G=sum_g, max_Ce=max_ce)
+        return StepResult(t, k, alert, True, diag)
+
+
+class TaichiLGMDBackend:
+    """LGMD-family layers in Taichi ndarrays (float32), driven by :mod:`cdnf_ti.kernels.lgmd`.
+
+    Parameters
+    ----------
+    params : LGMD2Params, LGMD1Params or FLGMDParams
+    shape : (H, W)
+    dt : int
+        Frame interval (ms).
+    kind : {"lgmd2", "lgmd1", "flgmd"}
+    arch : str
+    """
+
+    name = "taichi"
+
+    def __init__(self, params: Any, shape: tuple[int, int], dt: int, kind: str, arch: str = "cpu"):
+        from ..taichi_runtime import ensure_taichi
+
+        ensure_taichi(arch)
+        import taichi as ti
+
+        from ..kernels import lgmd as K
+        from ..kernels.common import COLUMN_BLOCKS
+
+        self.K = K
+        self.params = params
+        self.shape = tuple(shape)
+        self.kind = kind
+        self.blocks = COLUMN_BLOCKS
+        self.dt = dt
+
+        self._arrays: list[Any] = []
+
+        def nd() -> Any:
+            a = ti.ndarray(ti.f32, self.shape)
+            self._arrays.append(a)
+            return a
+
+        self.L, self.P = nd(), nd()
+        p = params
+        if kind == "lgmd2":
+            self.on, self.off = [nd(), nd()], [nd(), nd()]
+            self.I_on, self.I_off, self.S, self.Ce, self.G = nd(), nd(), nd(), nd(), nd()
+            self.an = tuple(dt / (dt + t) for t in p.tau_on)
+            self.af = tuple(dt / (dt + t) for t in p.tau_off)
+        elif kind == "lgmd1":
+            self.on, self.off = [nd(), nd()], [nd(), nd()]
+            self.I_on, self.E_off, self.S, self.G = nd(), nd(), nd(), nd()
+            self.a = tuple(dt / (dt + t) for t in p.tau_lateral)
+        elif kind == "flgmd":
+            self.on, self.off = [nd(), nd(), nd()], [nd(), nd(), nd()]
+            self.on0, self.off0 = nd(), nd()
+            self.S_on, self.S_off, self.S, self.G = nd(), nd(), nd(), nd()
+            self.a = tuple(dt / (dt + t) for t in p.tau_lateral)
+            ge = p.excitation_kernel()
+            self.ge = (float(ge[1, 1]), float(ge[0, 1]), float(ge[0, 0]))
+        else:
+            raise ValueError(f"unknown LGMD kind {kind!r}")
+        self.reset()
+
+    def reset(self) -> None:
+        for a in self._arrays:
+            self.K.fill(a, 0.0)
+        self.c = 0  # index of the current ON/OFF buffers
+        self.pi = 1  # F-LGMD: index of the previous (settled) buffers
+        self.ni = 2  # F-LGMD: scratch buffers
+
+    def load(self, grey: np.ndarray, first: bool) -> float:
+        scale = 1.0 if grey.dtype == np.uint8 else 255.0
+        return float(self.K.load_frame(grey, self.L, self.P, scale, int(first), self.blocks))
+
+    # -- LGMD2 ------------------------------------------------------------
+    def layers(self, w_on: float | None = None, w_off: float | None = None) -> Any:
+        p = self.params
+        c, q = 1 - self.c, self.c  # new current, previous
+        self.c = c
+        if self.kind == "lgmd2":
+            r = self.K.lgmd2_layers(self.P, self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.I_off,
+                                    self.S, self.Ce, self.G, p.clip, p.dc, w_on, w_off,
+                                    *p.k_on, *self.an, *p.k_off, *self.af, p.w_on_exc, p.w_off_exc, p.w_onoff,
+                                    p.delta_c, p.c_w, p.c_de, p.t_de, self.blocks)
+            return float(r[0]), float(r[1])
+        r = self.K.lgmd1_layers(self.P, self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.E_off,
+                                self.S, self.G, p.clip, p.dc, p.w_i_on, p.w_i_off, *p.k_lateral, *self.a,
+                                p.w_on_exc, p.w_off_exc, p.w_onoff, p.t_s, self.blocks)
+        return float(r)
+
+    # -- F-LGMD -----------------------------------------------------------
+    def prepare(self) -> None:
+        # the settled current buffers become the previous ones
+        self.pi, self.c = self.c, self.pi
+        p = self.params
+        self.K.flgmd_prepare(self.P, self.on0, self.off0, self.on[self.c], self.off[self.c],
+                             self.on[self.pi], self.off[self.pi], p.clip, p.dc, self.blocks)
+
+    def feedback_iterate(self, lam: float) -> tuple[float, float]:
+        p = self.params
+        c, n, q = self.c, self.ni, self.pi
+        with_off = p.beta_off != 0.0
+        r = self.K.flgmd_iterate(self.on0, self.off0, self.on[c], self.off[c], self.on[q], self.off[q],
+                                 self.on[n], self.off[n], *self.ge, *p.k_lateral, *self.a,
+                                 p.w_i_on, p.w_i_off, p.beta_on, p.beta_off, lam, self.blocks, with_off)
+        if with_off:
+            self.c, self.ni = n, c
+        else:
+            # only ON was iterated: swap the ON buffers, keep OFF in place
+            self.on[c], self.on[n] = self.on[n], self.on[c]
+        return float(r[0]), float(r[1])
+
+    def finish(self) -> float:
+        p = self.params
+        c, q = self.c, self.pi
+        return float(self.K.flgmd_finish(self.on[c], self.off[c], self.on[q], self.off[q], self.S_on, self.S_off,
+                                         self.S, self.G, *self.ge, *p.k_lateral, *self.a, p.w_i_on, p.w_i_off,
+                                         p.t_s, self.blocks))
+
+    def hold(self) -> None:
+        """FFI-held frame: the channels keep their previous values (nothing to do)."""
+
+    def fields(self) -> dict[str, np.ndarray]:
+        c = self.c
+        out = {"P": self.P.to_numpy(), "ON": self.on[c].to_numpy(), "OFF": self.off[c].to_numpy()}
+        names = {"lgmd2": ("I_on", "I_off", "S", "Ce", "G"), "lgmd1": ("I_on", "E_off", "S", "G"),
+                 "flgmd": ("S_on", "S_off", "S", "G")}[self.kind]
+        for k in names:
+            out[k] = getattr(self, k).to_numpy()
+        return out

@@ -1,0 +1,95 @@
+"""Taichi kernels of the SDNF reconstruction (single field, float32 state).
+
+Two launches per frame: :func:`load_binary` (binary pre-processing of the
+luminance change, returning the active-pixel count) and :func:`field_update`
+(time-delayed lateral interaction: the DoG acts on the previous frame's
+field, so each frame is one explicit update, no iteration). The DoG is applied
+as separable row/column passes with a replicate border. NumPy float64 oracle:
+:class:`cdnf_ti.baselines_reference.NumpySDNFBackend`.
+"""
+
+import taichi as ti
+
+from .common import block_span, tanh_rational
+
+F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
+F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
+
+
+@ti.kernel
+def load_binary(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, E: F2, scale: ti.f32, first: ti.i32,
+                t_b: ti.f32, blocks: ti.i32) -> ti.f64:
+    """``g = frame * scale`` in [0, 1]; ``P = g - L`` (0 when ``first``); ``E = [|P| >= t_b]``;
+    returns ``sum E``."""
+    H, W = L.shape[0], L.shape[1]
+    total = ti.f64(0.0)
+    for k in range(H * blocks):
+        i, j0, j1 = block_span(k, W, blocks)
+        acc = ti.f64(0.0)
+        for j in range(j0, j1):
+            g = ti.cast(frame[i, j], ti.f32) * scale
+            p = ti.select(first != 0, 0.0, g - L[i, j])
+            P[i, j] = p
+            L[i, j] = g
+            e = ti.select(ti.abs(p) >= t_b, 1.0, 0.0)
+            E[i, j] = e
+            acc += ti.cast(e, ti.f64)
+        ti.atomic_add(total, acc)
+    return total
+
+
+@ti.kernel
+def fill(x: F2, value: ti.f32):
+    """Set every element of ``x`` to ``value``."""
+    for i, j in x:
+        x[i, j] = value
+
+
+@ti.func
+def _act(u, theta_scale):
+    """Firing rate ``f(u) = theta([u]+) = tanh([u]+) / tanh(1)``."""
+    return tanh_rational(ti.max(u, 0.0)) * theta_scale
+
+
+@ti.kernel
+def field_update(
+    E: F2, F: F2, row1: F2, row2: F2, u_new: F2, F_new: F2, g1: F1, g2: F1,
+    A: ti.f32, B_t: ti.f32, h: ti.f32, theta_scale: ti.f32, blocks: ti.i32,
+) -> ti.f64:
+    """``u_new = E - h + vartheta(A g1g1 (*) F - B_t g2g2 (*) F)``, ``F_new = f(u_new)``;
+    returns ``sum F_new``.
+
+    ``F = f(u(t-1))`` is the previous frame's firing rate (time-delayed lateral
+    interaction); ``vartheta(a) = tanh(a / 2)``.
+    """
+    H, W = F.shape[0], F.shape[1]
+    R = (g1.shape[0] - 1) // 2
+    for k in range(H * blocks):
+        i, j0, j1 = block_span(k, W, blocks)
+        for j in range(j0, j1):
+            a1 = 0.0
+            a2 = 0.0
+            for d in range(-R, R + 1):
+                x = F[i, ti.min(ti.max(j + d, 0), W - 1)]
+                a1 += g1[d + R] * x
+                a2 += g2[d + R] * x
+            row1[i, j] = a1
+            row2[i, j] = a2
+    total = ti.f64(0.0)
+    for k in range(H * blocks):
+        i, j0, j1 = block_span(k, W, blocks)
+        acc = ti.f64(0.0)
+        for j in range(j0, j1):
+            b1 = 0.0
+            b2 = 0.0
+            for d in range(-R, R + 1):
+                ii = ti.min(ti.max(i + d, 0), H - 1)
+                b1 += g1[d + R] * row1[ii, j]
+                b2 += g2[d + R] * row2[ii, j]
+            v = E[i, j] - h + tanh_rational(0.5 * (A * b1 - B_t * b2))
+            u_new[i, j] = v
+            f = _act(v, theta_scale)
+            F_new[i, j] = f
+            acc += ti.cast(f, ti.f64)
+        ti.atomic_add(total, acc)
+    return total
