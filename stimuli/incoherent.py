@@ -24,11 +24,16 @@ coherent one as closely as the geometry allows (see
 Halting rule (paper): when the background cannot hold the displaced pixels
 (``n_d > H W - |M_k|``) at frame ``h``, the motion stops and the sequence
 jumps to its final frame, which every frame ``k >= h`` repeats (``halted_at =
-h``). The final frame is the stimulus's last frame when its displaced pixels
-fit (receding: the smallest object), else the last frame before ``h`` (looming:
-the largest object the background can hold, still incoherent); it is drawn
-with the same per-frame random choices. ``c = 1`` gives the coherent stimulus
-exactly.
+h``): the last frame before ``h``, i.e. the largest object the background can
+hold, still incoherent. ``c = 1`` gives the coherent stimulus exactly.
+
+Receding is the exact time reverse of incoherent looming with the same
+coherence and seed, as the coherent receding stimulus is the time reverse of
+looming. When that looming sequence halts, the receding one therefore starts by
+holding the largest incoherent object that fits for ``held_frames`` frames and
+then recedes (a literal forward rule would make receding at low coherence a
+single jump to a still image, since the large starting object leaves no room).
+``moving_frames`` is the range of frames that show the motion in both cases.
 
 Random numbers come from ``numpy.random.default_rng([seed, k])`` per frame
 (Python side); the Taichi kernels of :mod:`cdnf_ti.kernels.stimuli` do the
@@ -88,10 +93,17 @@ class IncoherentStimulus:
     ----------
     n_frames, fps, height, width : as ``base``.
     halted_at : int or None
-        First frame of the held final frame (halting rule), or ``None``.
+        First frame of the held final frame (halting rule), or ``None``
+        (always ``None`` for receding; see ``held_frames``).
     final_frame_index : int
         Frame of ``base`` that the held final frame shows (``n_frames - 1`` when
         no halt).
+    held_frames : int
+        Receding: number of leading frames that hold the starting frame (0
+        when the looming twin does not halt); 0 otherwise.
+    moving_frames : range
+        Frames that show the motion with exact pixel counts (before the halt,
+        or after the held prefix).
 
     Raises
     ------
@@ -112,6 +124,18 @@ class IncoherentStimulus:
         self.coherence = coherence
         self.seed = int(seed)
         self.backend = backend
+        self.held_frames = 0
+        self._forward: IncoherentStimulus | None = None
+        if base.motion == "receding":
+            twin = BasicStimulus(**{**base.to_dict(), "name": f"{base.polarity}_looming"})
+            self._forward = IncoherentStimulus(twin, coherence, seed, backend=backend)
+            self.object_pixels = self._forward.object_pixels[::-1].copy()
+            self.halted_at = None
+            self.final_frame_index = base.n_frames - 1
+            fh = self._forward.halted_at
+            self.held_frames = 0 if fh is None else base.n_frames - fh
+            self._kernels = None
+            return
         hw = base.height * base.width
         counts = np.array([int(base.object_mask(k).sum()) for k in range(base.n_frames)])
         fits = np.array([displaced_count(int(n), coherence) <= hw - int(n) for n in counts])
@@ -141,6 +165,12 @@ class IncoherentStimulus:
             self._blocks = COLUMN_BLOCKS
 
     # -- basic properties -------------------------------------------------
+    @property
+    def moving_frames(self) -> range:
+        """Frames that show the motion (exact pixel counts): before the halt / after the held prefix."""
+        end = self.n_frames if self.halted_at is None else self.halted_at
+        return range(self.held_frames, end)
+
     @property
     def name(self) -> str:
         return self.base.name
@@ -173,6 +203,7 @@ class IncoherentStimulus:
         """Every parameter (for sidecars): base stimulus, coherence, seed, halting."""
         return {"stimulus": self.name, "coherence": self.coherence, "seed": self.seed,
                 "halted_at": self.halted_at, "final_frame_index": self.final_frame_index,
+                "held_frames": self.held_frames,
                 "basic": self.base.to_dict()}
 
     # -- generation -------------------------------------------------------
@@ -249,6 +280,9 @@ class IncoherentStimulus:
 
     def frames(self) -> Iterator[np.ndarray]:
         """Yield the ``n_frames`` frames, float32 (H, W) in [0, 1], one at a time."""
+        if self._forward is not None:
+            yield from self._reversed_frames()
+            return
         H, W = self.height, self.width
         state = np.zeros((H, W), dtype=np.int8)
         target_of = np.full(H * W, -1, dtype=np.int64)
@@ -267,6 +301,15 @@ class IncoherentStimulus:
                 continue
             self._step(k, state, target_of, source_of)
             yield self._render(state)
+
+    def _reversed_frames(self) -> Iterator[np.ndarray]:
+        """Receding: the looming twin's frames in reverse, kept as 1-bit masks (H W / 8 bytes each)."""
+        H, W = self.height, self.width
+        obj = self._forward.object_value
+        packed = [np.packbits((f == obj).reshape(-1)) for f in self._forward.frames()]
+        for bits in reversed(packed):
+            mask = np.unpackbits(bits, count=H * W).reshape(H, W).astype(bool)
+            yield np.where(mask, np.float32(self.object_value), np.float32(self.background_value))
 
     def __iter__(self) -> Iterator[np.ndarray]:
         return self.frames()
@@ -302,7 +345,7 @@ def luminance_change(frames) -> np.ndarray:
 def luminance_change_match(stim: IncoherentStimulus) -> dict:
     """Compare the incoherent per-frame luminance change with the coherent one.
 
-    Only frames before the halt (``k < halted_at``) are compared.
+    Only transitions between frames of ``stim.moving_frames`` are compared.
 
     Returns
     -------
@@ -315,13 +358,15 @@ def luminance_change_match(stim: IncoherentStimulus) -> dict:
     """
     coh = luminance_change(stim.base.frames())
     inc = luminance_change(stim.frames())
-    n = coh.size if stim.halted_at is None else max(stim.halted_at - 1, 0)
-    coh, inc = coh[:n], inc[:n]
+    start, stop = stim.moving_frames.start, stim.moving_frames.stop
+    coh, inc = coh[start:max(stop - 1, start)], inc[start:max(stop - 1, start)]
+    n = int(coh.size)
     pos = coh > 0
     ratio = float(inc.sum() / coh.sum()) if coh.sum() > 0 else float("nan")
     rel = float(np.mean(np.abs(inc[pos] - coh[pos]) / coh[pos])) if pos.any() else float("nan")
     corr = float(np.corrcoef(inc, coh)[0, 1]) if n > 1 and inc.std() > 0 and coh.std() > 0 else float("nan")
-    return {"ratio": ratio, "mean_abs_rel_err": rel, "corr": corr, "frames": int(n), "halted_at": stim.halted_at}
+    return {"ratio": ratio, "mean_abs_rel_err": rel, "corr": corr, "frames": int(n), "halted_at": stim.halted_at,
+            "held_frames": stim.held_frames}
 
 
 def luminance_match_table(coherences: Sequence[float] = (1.0, 0.95, 0.75, 0.5, 0.2, 0.05),
@@ -335,6 +380,7 @@ def luminance_match_table(coherences: Sequence[float] = (1.0, 0.95, 0.75, 0.5, 0
             s = incoherent_stimulus(name, c, seed, height=size, width=size, start_half_size=size / 60)
             m = luminance_change_match(s)
             halt = "" if m["halted_at"] is None else f", halt@{m['halted_at']}"
+            halt += f", held {m['held_frames']}" if m["held_frames"] else ""
             cells.append(f"{m['ratio']:.3f} ({m['mean_abs_rel_err']:.3f}{halt})")
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
