@@ -13,11 +13,15 @@ _os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")  # keep CLI output
 
 from .errors import InputError
 from .frames import FrameSource, iter_grey, open_source, to_grey
-from .models import CDNF, MODELS, Model, StepResult, Trace, create_model, get_model_class, register_model
+from .models import (
+    CDNF, LGMD1, LGMD2, MODELS, SDNF, FLGMDONn, FLGMDParams, LGMD1Params, LGMD2Params, Model, SDNFParams,
+    StepResult, Trace, create_model, get_model_class, register_model,
+)
 from .params import CDNFParams
 
 __version__ = "0.1.0"
 
-__all__ = ["CDNF", "CDNFParams", "Model", "StepResult", "Trace", "MODELS", "create_model",
+__all__ = ["CDNF", "CDNFParams", "LGMD2", "LGMD2Params", "LGMD1", "LGMD1Params", "SDNF", "SDNFParams",
+           "FLGMDONn", "FLGMDParams", "Model", "StepResult", "Trace", "MODELS", "create_model",
            "get_model_class", "register_model", "InputError", "FrameSource", "open_source",
            "iter_grey", "to_grey", "__version__"]
