@@ -110,7 +110,8 @@ def _frames(task: ClipTask, src):
     except ImportError as e:
         raise RuntimeError("synthetic rain is not available (cdnf_ti.stimuli.rain missing)") from e
     params = RainParams(**task.rain_params) if task.rain_params else None
-    rain = RainyFrames(grey, params, seed=rain_seed(task.seed, task.clip))
+    rain = RainyFrames(grey, params, seed=rain_seed(task.seed, task.clip),
+                       backend="numpy" if task.backend == "numpy" else "taichi")
     return rain, rain
 
 

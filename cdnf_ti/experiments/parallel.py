@@ -53,7 +53,7 @@ def _one_line(e: BaseException) -> str:
 
 def map_tasks(fn: Callable[[Any], Any], tasks: Sequence[Any], *, workers: int | None = None,
               scheduler: str | Any | None = None, arch: str = "cpu",
-              progress: bool | str = False) -> Iterator[tuple[int, Any]]:
+              progress: bool | str = False, connect_timeout: float = 20.0) -> Iterator[tuple[int, Any]]:
     """Run ``fn(task)`` for every task and yield ``(index, result)`` as each finishes.
 
     Parameters
@@ -72,6 +72,8 @@ def map_tasks(fn: Callable[[Any], Any], tasks: Sequence[Any], *, workers: int | 
         Taichi architecture the workers initialise.
     progress : bool or str
         Show a tqdm bar over tasks (a string is its label).
+    connect_timeout : float
+        Seconds to wait for the Dask scheduler.
 
     Yields
     ------
@@ -88,7 +90,7 @@ def map_tasks(fn: Callable[[Any], Any], tasks: Sequence[Any], *, workers: int | 
         if n == 0:
             return
         if scheduler is not None:
-            yield from _dask(fn, tasks, scheduler, arch, bar)
+            yield from _dask(fn, tasks, scheduler, arch, bar, connect_timeout)
             return
         w = default_workers(n) if workers is None else max(0, int(workers))
         if w <= 1:
@@ -135,14 +137,14 @@ def _dask_task(fn, task, arch):
     return fn(task)
 
 
-def _dask(fn, tasks, scheduler, arch, bar) -> Iterator[tuple[int, Any]]:
+def _dask(fn, tasks, scheduler, arch, bar, connect_timeout=20.0) -> Iterator[tuple[int, Any]]:
     try:
         from distributed import Client, as_completed
     except ImportError as e:  # pragma: no cover - dask[distributed] is a dependency
         raise ValueError("--scheduler needs dask.distributed (pip install 'dask[distributed]')") from e
     own = not isinstance(scheduler, Client)
     try:
-        client = Client(scheduler, timeout="20s") if own else scheduler
+        client = Client(scheduler, timeout=f"{connect_timeout}s") if own else scheduler
     except OSError as e:
         raise ValueError(f"cannot connect to the Dask scheduler at {scheduler}: {_one_line(e)}") from None
     futures: dict = {}

@@ -1,0 +1,223 @@
+"""Built-in experiments: the paper's Table I, the coherence sweep (Fig. 4) and Table II.
+
+Each stimulus x model (x coherence) run is an independent task, run on local
+processes or a Dask cluster like the dataset clips (:mod:`.parallel`).
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..atomic import atomic_write_json, atomic_write_text
+from ..paper import TABLE1
+
+#: Coherence degrees of the sweep (paper Fig. 4 goes from 100% down to 5%).
+COHERENCES = (1.0, 0.95, 0.9, 0.8, 0.75, 0.6, 0.5, 0.4, 0.2, 0.05)
+
+
+@dataclass(frozen=True)
+class StimulusTask:
+    """One model on one generated stimulus.
+
+    Attributes
+    ----------
+    model : str
+    stimulus : str
+        Basic stimulus name.
+    size : int
+        Frame side (px).
+    coherence : float or None
+        None: the coherent basic stimulus; else the incoherent stimulus.
+    seed : int
+    out : str
+        Folder for the trace CSV (``traces/<stimulus>[_c<coh>].<model>.csv``).
+    backend, arch : str
+    """
+
+    model: str
+    stimulus: str
+    size: int
+    coherence: float | None
+    seed: int
+    out: str
+    backend: str = "taichi"
+    arch: str = "cpu"
+
+    @property
+    def trace_file(self) -> Path:
+        tag = self.stimulus if self.coherence is None else f"{self.stimulus}_c{round(self.coherence * 100):03d}"
+        return Path(self.out) / "traces" / f"{tag}.{self.model}.csv"
+
+
+def make_stimulus(name: str, size: int, coherence: float | None = None, seed: int = 0):
+    """A basic (coherence None) or incoherent stimulus, scaled to ``size`` x ``size`` px."""
+    kw = dict(height=size, width=size, start_half_size=size / 60)
+    if coherence is None:
+        from ..stimuli.basic import basic_stimulus
+
+        return basic_stimulus(name, **kw)
+    try:
+        from ..stimuli.incoherent import incoherent_stimulus
+    except ImportError as e:
+        raise ValueError("incoherent stimuli are not available (cdnf_ti.stimuli.incoherent missing)") from e
+    return incoherent_stimulus(name, coherence, seed=seed, **kw)
+
+
+def _frames_of(stim):
+    return stim.frames() if hasattr(stim, "frames") else iter(stim)
+
+
+def run_stimulus_task(task: StimulusTask) -> dict:
+    """Run one model on one stimulus; save the trace; return a summary record."""
+    from ..models import create_model
+    from .parallel import init_worker
+
+    if task.backend == "taichi":
+        init_worker(task.arch)
+    stim = make_stimulus(task.stimulus, task.size, task.coherence, task.seed)
+    fps = float(getattr(stim, "fps", 30.0))
+    model = create_model(task.model, backend=task.backend, arch=task.arch, fps=fps)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tr = model.run(_frames_of(stim), progress=False)
+    tr.to_csv(task.trace_file)
+    return {"model": task.model, "stimulus": task.stimulus, "coherence": task.coherence,
+            "alert": int(tr.first_alert is not None), "first_alert": tr.first_alert,
+            "max_output": float(tr.output.max()), "frames": tr.n_frames, "fps": fps,
+            "threshold": tr.threshold, "converged": bool(tr.converged.all()), "seconds": round(tr.seconds, 3)}
+
+
+def _snapshots(name: str, size: int, coherence: float | None, seed: int, k: Sequence[float]) -> list[np.ndarray]:
+    frames = [np.asarray(f, dtype=np.float32) for f in _frames_of(make_stimulus(name, size, coherence, seed))]
+    n = len(frames)
+    return [frames[min(n - 1, int(round(q * (n - 1))))] for q in k]
+
+
+def _run(tasks: list[StimulusTask], workers, scheduler, arch, progress, label) -> list[dict]:
+    from .parallel import TaskFailed, map_tasks
+
+    out: list[dict | None] = [None] * len(tasks)
+    for i, res in map_tasks(run_stimulus_task, tasks, workers=workers, scheduler=scheduler, arch=arch,
+                            progress=label if progress else False):
+        if isinstance(res, TaskFailed):
+            t = tasks[i]
+            res = {"model": t.model, "stimulus": t.stimulus, "coherence": t.coherence, "alert": None,
+                   "error": str(res)}
+        out[i] = res
+    return [r for r in out if r is not None]
+
+
+def table1(models: Sequence[str], out: str | Path, size: int = 160, seed: int = 0, workers: int | None = None,
+           scheduler: Any = None, backend: str = "taichi", arch: str = "cpu", progress: bool = True,
+           figures: bool = True) -> dict:
+    """Paper Table I: each model on the six basic stimuli; writes table1.md/json and Fig. 2 panel.
+
+    Returns
+    -------
+    dict
+        ``result[model][stimulus] = {"alert", "first_alert", "max_output", ...}``.
+    """
+    from ..demo import format_table1
+    from ..models.base import Trace
+    from ..stimuli.basic import BASIC_STIMULI, PAPER_LABELS
+
+    out = Path(out)
+    tasks = [StimulusTask(m, s, size, None, seed, str(out), backend, arch) for m in models for s in BASIC_STIMULI]
+    recs = _run(tasks, workers, scheduler, arch, progress, "table1")
+    res: dict[str, dict[str, dict]] = {m: {} for m in models}
+    for r in recs:
+        res[r["model"]][r["stimulus"]] = r
+    atomic_write_json(out / "table1.json", {"size": size, "result": res, "paper": {m: TABLE1.get(m) for m in models}})
+    md = (f"# Basic selectivity (paper Table I), {size}x{size} px stimuli at 30 fps\n\n"
+          "1 = the model alerts; the paper's value in brackets.\n\n" + format_table1(res) + "\n")
+    atomic_write_text(out / "table1.md", md)
+    if figures:
+        from .figures import plot_selectivity
+
+        traces = {s: {m: Trace.from_csv(t.trace_file, m, res[m][s].get("threshold"))
+                      for t in tasks for m in [t.model] if t.stimulus == s and t.trace_file.is_file()}
+                  for s in BASIC_STIMULI}
+        snaps = {s: _snapshots(s, size, None, seed, (0.0, 0.5, 0.8, 1.0)) for s in BASIC_STIMULI}
+        plot_selectivity(out / "figures" / "basic_selectivity.png", traces, snaps, PAPER_LABELS)
+    return res
+
+
+def coherence_sweep(models: Sequence[str], out: str | Path, size: int = 160,
+                    coherences: Sequence[float] = COHERENCES, seed: int = 0, workers: int | None = None,
+                    scheduler: Any = None, backend: str = "taichi", arch: str = "cpu", progress: bool = True,
+                    figures: bool = True, stimuli: Sequence[str] | None = None) -> dict:
+    """Fig. 4: each model on each incoherent stimulus at each coherence; writes coherence.md/json/csv + figure.
+
+    Returns
+    -------
+    dict
+        ``table[stimulus][model][coherence] = {"alert", "first_alert", "max_output", ...}``.
+    """
+    from ..stimuli.basic import BASIC_STIMULI, PAPER_LABELS
+
+    for c in coherences:
+        if not (0 < c <= 1):
+            raise ValueError(f"coherence must be in (0, 1], got {c}")
+    stimuli = list(stimuli or BASIC_STIMULI)
+    out = Path(out)
+    make_stimulus(stimuli[0], 16, coherences[0], seed)  # fail early if incoherent stimuli are missing
+    tasks = [StimulusTask(m, s, size, float(c), seed, str(out), backend, arch)
+             for s in stimuli for c in coherences for m in models]
+    recs = _run(tasks, workers, scheduler, arch, progress, "coherence")
+    table: dict[str, dict[str, dict[float, dict]]] = {s: {m: {} for m in models} for s in stimuli}
+    for r in recs:
+        table[r["stimulus"]][r["model"]][r["coherence"]] = r
+    rows = ["stimulus,model,coherence,alert,first_alert,max_output"]
+    for s in stimuli:
+        for m in models:
+            for c in coherences:
+                r = table[s][m].get(float(c), {})
+                fa = r.get("first_alert")
+                rows.append(f"{s},{m},{c:g},{'' if r.get('alert') is None else r['alert']},"
+                            f"{'' if fa is None else fa},{r.get('max_output', '')}")
+    atomic_write_text(out / "coherence.csv", "\n".join(rows) + "\n")
+    atomic_write_json(out / "coherence.json", {"size": size, "seed": seed, "coherences": list(coherences),
+                                               "table": {s: {m: {f"{c:g}": v for c, v in d.items()}
+                                                             for m, d in t.items()} for s, t in table.items()}})
+    atomic_write_text(out / "coherence.md", coherence_markdown(table, coherences, size))
+    if figures:
+        from .figures import plot_coherence
+
+        lo = min(coherences)
+        snaps = {s: {c: _snapshots(s, size, c, seed, (0.8,))[0] for c in sorted({lo, max(coherences)})}
+                 for s in stimuli}
+        plot_coherence(out / "figures" / "coherence_sweep.png", table, coherences, snaps, PAPER_LABELS)
+    return table
+
+
+def coherence_markdown(table: dict, coherences: Sequence[float], size: int | None = None) -> str:
+    """Markdown: a row per stimulus x model, a column per coherence; 1 = alerts."""
+    from ..stimuli.basic import PAPER_LABELS
+
+    models = list(dict.fromkeys(m for s in table for m in table[s]))
+    head = "| Stimulus | Model | " + " | ".join(f"{100 * c:.0f}%" for c in coherences) + " |"
+    lines = [f"# Coherence sweep (paper Fig. 4){'' if size is None else f', {size}x{size} px'}", "",
+             "1 = the model alerts at that coherence degree (fraction of object pixels kept in place).", "",
+             head, "|---|---|" + "---|" * len(coherences)]
+    for s in table:
+        for m in models:
+            cells = []
+            for c in coherences:
+                r = table[s][m].get(float(c))
+                cells.append("err" if r is None or r.get("alert") is None else str(r["alert"]))
+            lines.append(f"| {PAPER_LABELS.get(s, s)} | {m} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def default_real_folder() -> Path | None:
+    """``../shared/data/real`` next to the repository (or the current folder), if present."""
+    here = Path(__file__).resolve().parents[2]
+    for base in (here.parent, Path.cwd().parent, Path.cwd()):
+        cand = base / "shared" / "data" / "real"
+        if (cand / "labels.csv").is_file():
+            return cand
+    return None

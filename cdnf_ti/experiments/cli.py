@@ -1,0 +1,155 @@
+"""Command lines ``python -m cdnf_ti.run dataset ...`` and ``python -m cdnf_ti.run experiment ...``.
+
+Exit codes: 0 all done; 1 the run finished but some clip/model failed (error
+rows in results.csv); 2 bad usage or a bad labels file (nothing was run).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Sequence
+
+from ..errors import InputError
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+
+
+def _nonneg_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be >= 0")
+    return v
+
+
+def _add_parallel(ap: argparse.ArgumentParser) -> None:
+    ap.add_argument("--workers", type=_nonneg_int, default=None,
+                    help="local worker processes (default: one per CPU core; 0 or 1: run in this process)")
+    ap.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                    help="Dask distributed scheduler address (e.g. tcp://10.0.0.5:8786): run the tasks there")
+    ap.add_argument("--seed", type=int, default=0, help="random seed (rain, incoherent stimuli; default 0)")
+    ap.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    ap.add_argument("--no-figures", action="store_true", help="do not draw figures")
+
+
+def _add_dataset_options(ap: argparse.ArgumentParser, rain_default: str) -> None:
+    from ..run import add_model_options
+
+    ap.add_argument("--labels", default=None, help="labels CSV (default: DIR/labels.csv)")
+    add_model_options(ap, default_models="cdnf" if rain_default == "none" else "all")
+    ap.add_argument("--rain", choices=("none", "only", "both"), default=rain_default,
+                    help="clean clips, clips with synthetic rain, or both (default: %(default)s)")
+    ap.add_argument("--pad-before", type=_nonneg_int, default=0, metavar="N",
+                    help="frames of tolerance before each window start (default 0)")
+    ap.add_argument("--pad-after", type=_nonneg_int, default=0, metavar="N",
+                    help="frames of tolerance after each window end (default 0)")
+    _add_parallel(ap)
+
+
+def _dataset(args, folder: Path, out: Path) -> int:
+    from ..run import parse_models
+    from .dataset import run_dataset
+    from .reports import table2_markdown
+    from .scoring import Padding
+
+    models = parse_models(args.models)
+    run = run_dataset(folder, args.labels, out, models=models, rain=args.rain,
+                      padding=Padding(args.pad_before, args.pad_after), seed=args.seed, workers=args.workers,
+                      scheduler=args.scheduler, backend=args.backend, arch=args.arch,
+                      progress=not args.no_progress, figures=not args.no_figures)
+    print(table2_markdown(run.summary["results"], run.models, run.conditions))
+    print(f"{len(run.labels)} clips x {len(run.models)} models x {len(run.conditions)} conditions: "
+          f"{run.ran} run now, {run.skipped} reused; results in {out}/ (results.csv, summary.md)")
+    for e in run.summary["errors"]:
+        print(f"error: {e['error']} [{e['model']}, {e['condition']}]", file=sys.stderr)
+    if run.failed:
+        print(f"{run.n_errors} clip/model run(s) failed; see {out}/results.csv", file=sys.stderr)
+        return EXIT_FAILED
+    return EXIT_OK
+
+
+def dataset_main(argv: Sequence[str]) -> int:
+    """``python -m cdnf_ti.run dataset DIR --labels CSV --out OUT [...]``."""
+    ap = argparse.ArgumentParser(
+        prog="python -m cdnf_ti.run dataset",
+        description="Run models on every labelled clip of a folder (clean and/or with synthetic rain), score "
+                    "them (shared/spec/EVALUATION.md) and write traces, results.csv, summary.md/json and "
+                    "figures. Rerunning with the same OUT skips finished work.")
+    ap.add_argument("folder", metavar="DIR", help="folder of videos")
+    ap.add_argument("--out", required=True, help="output folder")
+    _add_dataset_options(ap, rain_default="none")
+    args = ap.parse_args(list(argv))
+    return _dataset(args, Path(args.folder), Path(args.out))
+
+
+def experiment_main(argv: Sequence[str]) -> int:
+    """``python -m cdnf_ti.run experiment table1|coherence|table2 [...]``."""
+    from ..run import add_model_options, parse_models
+    from . import builtin
+
+    ap = argparse.ArgumentParser(prog="python -m cdnf_ti.run experiment",
+                                 description="Regenerate the paper's experiments.")
+    sub = ap.add_subparsers(dest="which", required=True, metavar="{table1,coherence,table2}")
+    p1 = sub.add_parser("table1", help="basic selectivity on the six basic stimuli (Table I, Fig. 2)")
+    p2 = sub.add_parser("coherence", help="coherence sweep on the six incoherent stimuli (Fig. 4)")
+    for p, name in ((p1, "table1"), (p2, "coherence")):
+        p.add_argument("--out", default=f"cdnf_experiments/{name}", help="output folder (default: %(default)s)")
+        add_model_options(p, default_models="all")
+        p.add_argument("--size", type=int, default=160,
+                       help="frame side in px (default: %(default)s for speed; the paper uses 600)")
+        _add_parallel(p)
+    p2.add_argument("--coherences", default=",".join(f"{c:g}" for c in builtin.COHERENCES),
+                    help="comma-separated coherence degrees in (0, 1] (default: %(default)s)")
+    p2.add_argument("--stimuli", default=None, help="comma-separated basic stimuli (default: all six)")
+    p3 = sub.add_parser("table2", help="accuracy on a labelled folder, clean and with synthetic rain (Table II)")
+    p3.add_argument("folder", nargs="?", default=None, metavar="DIR",
+                    help="folder of videos with labels.csv (default: ../shared/data/real next to the repository)")
+    p3.add_argument("--out", default="cdnf_experiments/table2", help="output folder (default: %(default)s)")
+    _add_dataset_options(p3, rain_default="both")
+    args = ap.parse_args(list(argv))
+
+    if args.which == "table2":
+        folder = Path(args.folder) if args.folder else builtin.default_real_folder()
+        if folder is None:
+            raise InputError("table2", "no labelled folder given and ../shared/data/real was not found; "
+                                       "pass one: python -m cdnf_ti.run experiment table2 DIR")
+        return _dataset(args, folder, Path(args.out))
+    if args.size < 16:
+        raise ValueError(f"--size must be at least 16 px, got {args.size}")
+    models = parse_models(args.models)
+    kw = dict(size=args.size, seed=args.seed, workers=args.workers, scheduler=args.scheduler,
+              backend=args.backend, arch=args.arch, progress=not args.no_progress, figures=not args.no_figures)
+    if args.which == "table1":
+        from ..demo import format_table1
+
+        res = builtin.table1(models, args.out, **kw)
+        print(format_table1(res))
+        errs = [r for d in res.values() for r in d.values() if r.get("error")]
+        for r in errs:
+            print(f"error: {r['stimulus']} [{r['model']}]: {r['error']}", file=sys.stderr)
+        failed = bool(errs)
+    else:
+        try:
+            coh = [float(c) for c in args.coherences.split(",") if c.strip()]
+        except ValueError:
+            raise ValueError(f"--coherences must be numbers, got {args.coherences!r}") from None
+        if not coh:
+            raise ValueError("--coherences is empty")
+        stimuli = [s.strip() for s in args.stimuli.split(",")] if args.stimuli else None
+        if stimuli:
+            from ..stimuli.basic import BASIC_STIMULI
+
+            bad = [s for s in stimuli if s not in BASIC_STIMULI]
+            if bad:
+                raise ValueError(f"unknown stimulus {bad[0]!r}; choose from {', '.join(BASIC_STIMULI)}")
+        table = builtin.coherence_sweep(models, args.out, coherences=coh, stimuli=stimuli, **kw)
+        print(builtin.coherence_markdown(table, coh, args.size))
+        errs = [r for t in table.values() for d in t.values() for r in d.values() if r.get("error")]
+        for r in errs:
+            print(f"error: {r['stimulus']} c={r['coherence']:g} [{r['model']}]: {r['error']}", file=sys.stderr)
+        failed = bool(errs)
+    print(f"results in {args.out}/", file=sys.stderr)
+    return EXIT_FAILED if failed else EXIT_OK

@@ -1,0 +1,246 @@
+"""Reports of a dataset run: results.csv, threshold_sweep.csv, summary.md and summary.json."""
+from __future__ import annotations
+
+import csv
+import io
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Iterable, Mapping, Sequence
+
+from ..atomic import atomic_write_json, atomic_write_text
+from ..paper import TABLE2
+from .scoring import tally
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .dataset import DatasetRun
+
+CONDITION_LABELS = {"clean": "Normal", "rain": "With synthetic rain"}
+SWEEP_COLUMNS = ("model", "condition", "parameter", "value", "is_default", "TP", "TN", "FP", "FN", "FN_early",
+                 "FN_late", "FN_none", "clips", "accuracy", "hits", "false_alarms", "method")
+
+
+def _cell(v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, bool):
+        return "1" if v else "0"
+    if isinstance(v, float):
+        if not math.isfinite(v):
+            return ""
+        return f"{v:.6g}"
+    return str(v)
+
+
+def csv_text(rows: Iterable[Mapping], columns: Sequence[str]) -> str:
+    """CSV text of ``rows`` restricted to ``columns`` (None -> empty cell)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(columns)
+    for r in rows:
+        w.writerow([_cell(r.get(c)) for c in columns])
+    return buf.getvalue()
+
+
+def read_results(path: str | Path) -> list[dict]:
+    """Read a results.csv back (all values as strings)."""
+    with open(path, newline="", encoding="utf-8") as f:
+        return list(csv.DictReader(f))
+
+
+def pct(acc: float | None) -> str:
+    """``0.7714`` -> ``"77.14%"``; None -> ``"n/a"``."""
+    return "n/a" if acc is None else f"{100.0 * acc:.2f}%"
+
+
+def load_traces(run: "DatasetRun") -> dict:
+    """The saved traces of every successful row: (clip, model, condition) -> Trace."""
+    from ..models.base import Trace
+    from .dataset import trace_path
+
+    traces = {}
+    for r in run.rows:
+        if r.get("error"):
+            continue
+        p = trace_path(run.out, r["condition"], r["clip"], r["model"])
+        thr = r.get("threshold")
+        traces[(r["clip"], r["model"], r["condition"])] = Trace.from_csv(
+            p, model=r["model"], threshold=None if thr in ("", None) else float(thr))
+    return traces
+
+
+def threshold_sweep(run: "DatasetRun", traces: Mapping) -> tuple[list[dict], dict]:
+    """Sweep rows and the spec of each model (see :mod:`cdnf_ti.experiments.sweep`)."""
+    from .sweep import sweep_dataset, sweep_spec
+
+    labels = {lab.clip: lab for lab in run.labels}
+    fps = {r["clip"]: float(r["fps"]) for r in run.rows if not r.get("error") and r.get("fps") not in ("", None)}
+    specs = {}
+    for m in run.models:
+        mt = [t for (c, mm, cond), t in traces.items() if mm == m]
+        specs[m] = sweep_spec(m, mt)
+    return sweep_dataset(specs, traces, labels, fps, run.padding), specs
+
+
+def summary_dict(run: "DatasetRun", specs: Mapping, dataset: str, labels_path: str, seed: int) -> dict:
+    """The content of summary.json."""
+    tallies = tally(run.rows)
+    n_col = sum(1 for lab in run.labels if lab.collision)
+    acc: dict[str, dict[str, Any]] = {}
+    for m in run.models:
+        acc[m] = {}
+        for c in run.conditions:
+            t = tallies.get((m, c))
+            acc[m][c] = t.to_dict() if t is not None else None
+    snrs = [float(r["snr_db"]) for r in run.rows
+            if r["condition"] == "rain" and not r.get("error") and r.get("snr_db") not in ("", None)]
+    best: dict[str, dict] = {}
+    for m in run.models:
+        for c in run.conditions:
+            cand = [s for s in run.sweep if s["model"] == m and s["condition"] == c and s["accuracy"] is not None]
+            if cand:
+                b = max(cand, key=lambda s: (s["accuracy"], -abs(s["value"] - (specs[m].default or 0.0))))
+                dflt = [s for s in cand if s["is_default"]]
+                best.setdefault(m, {})[c] = {
+                    "parameter": b["parameter"], "best_value": b["value"], "best_accuracy": b["accuracy"],
+                    "default_value": specs[m].default,
+                    "default_accuracy": dflt[0]["accuracy"] if dflt else None, "method": specs[m].method,
+                }
+    return {
+        "dataset": dataset,
+        "labels": labels_path,
+        "clips": len(run.labels),
+        "collision_clips": n_col,
+        "non_collision_clips": len(run.labels) - n_col,
+        "models": run.models,
+        "conditions": run.conditions,
+        "padding_frames": run.padding.to_dict(),
+        "seed": seed,
+        "mean_rain_snr_db": (sum(snrs) / len(snrs)) if snrs else None,
+        "results": acc,
+        "paper_table2": {m: TABLE2[m] for m in run.models if m in TABLE2},
+        "threshold_sweep": best,
+        "errors": [{"clip": r["clip"], "model": r["model"], "condition": r["condition"], "error": r["error"]}
+                   for r in run.rows if r.get("error")],
+        "ran": run.ran,
+        "skipped_finished": run.skipped,
+    }
+
+
+def table2_markdown(results: Mapping[str, Mapping[str, Any]], models: Sequence[str],
+                    conditions: Sequence[str]) -> str:
+    """Paper Table II layout: a row per condition, a column per model, paper value beside."""
+    lines = ["| Stimuli | " + " | ".join(models) + " |", "|---|" + "---|" * len(models)]
+    for c in conditions:
+        cells = []
+        for m in models:
+            d = (results.get(m) or {}).get(c)
+            got = pct(d["accuracy"]) if d else "n/a"
+            paper = TABLE2.get(m, {}).get(c)
+            cells.append(got + (f" (paper {paper:.2f}%)" if paper is not None else ""))
+        lines.append(f"| {CONDITION_LABELS.get(c, c)} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def summary_markdown(run: "DatasetRun", summary: Mapping, specs: Mapping) -> str:
+    """summary.md: Table II style accuracy, counts, per-clip first alerts, threshold sweep, errors."""
+    pad = run.padding
+    L: list[str] = ["# cdnf_ti dataset run", ""]
+    L.append(f"- dataset: `{summary['dataset']}` (labels `{summary['labels']}`): {summary['clips']} clips, "
+             f"{summary['collision_clips']} collision, {summary['non_collision_clips']} non-collision")
+    L.append(f"- models: {', '.join(run.models)}; conditions: {', '.join(run.conditions)}")
+    L.append(f"- window padding: {pad.before} frames before the window start, {pad.after} frames after its end")
+    if "rain" in run.conditions:
+        snr = summary.get("mean_rain_snr_db")
+        L.append(f"- synthetic rain: seed {summary['seed']}, mean SNR "
+                 f"{'n/a' if snr is None else f'{snr:.2f} dB'} (paper: 19.7 dB)")
+    L.append("- scoring: collision clip TP if the first alert is inside the (padded) window, else FN "
+             "(early / late / none); non-collision clip TN if no alert, else FP; "
+             "accuracy = (TP+TN)/(TP+TN+FP+FN); clips that failed are not scored")
+    L += ["", "## Accuracy (paper Table II layout; the paper's 35-clip numbers in brackets)", ""]
+    L.append(table2_markdown(summary["results"], run.models, run.conditions))
+    L += ["", "## Outcomes", "",
+          "| Model | Condition | TP | TN | FP | FN (early/late/none) | Errors | Accuracy | Mean TP lead time |",
+          "|---|---|---|---|---|---|---|---|---|"]
+    for m in run.models:
+        for c in run.conditions:
+            d = summary["results"][m][c]
+            if d is None:
+                continue
+            lt = d["mean_lead_time_ms"]
+            L.append(f"| {m} | {c} | {d['TP']} | {d['TN']} | {d['FP']} | {d['FN']} "
+                     f"({d['FN_early']}/{d['FN_late']}/{d['FN_none']}) | {d['errors']} | {pct(d['accuracy'])} | "
+                     f"{'' if lt is None else f'{lt:.0f} ms'} |")
+    L += ["", "## First alert per clip (frame, outcome; lead time before contact)", ""]
+    cols = [(m, c) for m in run.models for c in run.conditions]
+    L.append("| Clip | Label | Window (padded) | Contact | " + " | ".join(f"{m} {c}" for m, c in cols) + " |")
+    L.append("|---|---|---|---|" + "---|" * len(cols))
+    by = {(r["clip"], r["model"], r["condition"]): r for r in run.rows}
+    for lab in run.labels:
+        win = ""
+        if lab.collision:
+            lo, hi = max(0, lab.window_start - pad.before), lab.window_end + pad.after
+            win = f"{lab.window_start}-{lab.window_end}" + (f" ({lo}-{hi})" if (lo, hi) != (lab.window_start,
+                                                                                      lab.window_end) else "")
+        cells = []
+        for m, c in cols:
+            r = by[(lab.clip, m, c)]
+            if r.get("error"):
+                cells.append("error")
+                continue
+            fa = r["first_alert"]
+            txt = "none" if fa in (None, "") else str(fa)
+            txt += f" {r['outcome']}" + (f" ({r['fn_reason']})" if r["fn_reason"] else "")
+            if r.get("lead_time_ms") not in (None, ""):
+                txt += f", {float(r['lead_time_ms']):.0f} ms"
+            cells.append(txt)
+        L.append(f"| {lab.clip} | {lab.label} | {win} | {'' if lab.contact_frame is None else lab.contact_frame} | "
+                 + " | ".join(cells) + " |")
+    if run.sweep:
+        L += ["", "## Threshold sweep", "",
+              "Accuracy, hits (TP) and false alarms (FP + early FN: an alert on a non-collision clip or before "
+              "the window) as each model's alert level varies; re-scored from the saved traces. "
+              "`threshold_sweep.csv` has every count; `figures/threshold_sweep.png` plots them.", ""]
+        for m in run.models:
+            spec = specs[m]
+            how = {"model": f"the model's own `sweep_alerts` over `{spec.parameter}`",
+                   "cdnf-epsilon": "alert = I_v > 0.5 + epsilon on the saved I_v",
+                   "fallback": f"fallback: alert = {spec.parameter.split()[0]} > value on the saved output "
+                               "(the model defines no `sweep_alerts`)"}[spec.method]
+            L.append(f"### {m}: {spec.parameter} ({how})")
+            L.append("")
+            L.append(f"| {spec.parameter} | " + " | ".join(f"{c} accuracy | {c} hits | {c} false alarms"
+                                                         for c in run.conditions) + " |")
+            L.append("|---|" + "---|---|---|" * len(run.conditions))
+            for v in spec.values:
+                cells = []
+                for c in run.conditions:
+                    s = [x for x in run.sweep if x["model"] == m and x["condition"] == c and x["value"] == v]
+                    cells.append(f"{pct(s[0]['accuracy'])} | {s[0]['hits']} | {s[0]['false_alarms']}" if s
+                                 else "n/a | | ")
+                mark = " (default)" if spec.default is not None and abs(v - spec.default) < 1e-12 else ""
+                L.append(f"| {v:.6g}{mark} | " + " | ".join(cells) + " |")
+            L.append("")
+    if summary["errors"]:
+        L += ["", "## Errors (not scored)", ""]
+        L += [f"- {e['clip']} [{e['model']}, {e['condition']}]: {e['error']}" for e in summary["errors"]]
+    L += ["", f"Runs done now: {run.ran}; found finished on disk and reused: {run.skipped}.", ""]
+    return "\n".join(L)
+
+
+def write_reports(run: "DatasetRun", dataset: str, labels_path: str, seed: int, figures: bool = True,
+                  progress: bool = False) -> None:
+    """Write results.csv, threshold_sweep.csv, summary.md/json and (optionally) the figures."""
+    from .dataset import RESULT_COLUMNS
+
+    out = Path(run.out)
+    atomic_write_text(out / "results.csv", csv_text(run.rows, RESULT_COLUMNS))
+    traces = load_traces(run)
+    run.sweep, specs = threshold_sweep(run, traces)
+    atomic_write_text(out / "threshold_sweep.csv", csv_text(run.sweep, SWEEP_COLUMNS))
+    run.summary = summary_dict(run, specs, dataset, labels_path, seed)
+    atomic_write_json(out / "summary.json", run.summary)
+    atomic_write_text(out / "summary.md", summary_markdown(run, run.summary, specs))
+    if figures:
+        from .figures import dataset_figures
+
+        dataset_figures(run, traces, specs, progress=progress)
