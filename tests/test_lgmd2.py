@@ -201,3 +201,14 @@ def test_cli_runs_several_models_on_an_npy_video(tmp_path, capsys):
     header = (out / "clip.lgmd2.csv").read_text().splitlines()[0].split(",")
     assert header[:4] == ["frame", "K", "spike", "converged"] and "Kh" in header
     assert len(set(header)) == len(header)
+
+
+def test_sweep_alerts_at_default_count_reproduces_the_run_alerts():
+    from cdnf_ti import LGMD2
+    from conftest import small_stimulus
+
+    tr = LGMD2().run(small_stimulus("dark_looming", size=96).frames())
+    (alerts,) = LGMD2.sweep_alerts(tr, [LGMD2.sweep_default()])
+    assert np.array_equal(alerts, tr.spike)
+    loose = LGMD2.sweep_alerts(tr, [1.0])[0]
+    assert loose.sum() >= tr.spike.sum()

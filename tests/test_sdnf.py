@@ -100,3 +100,13 @@ def test_model_is_documented_as_a_reconstruction():
     import cdnf_ti.models.sdnf as mod
 
     assert "RECONSTRUCTION" in SDNF.__doc__ and "own choice" in mod.__doc__
+
+
+def test_sweep_alerts_at_default_epsilon_reproduces_the_run_alerts():
+    from cdnf_ti import SDNF
+    from conftest import small_stimulus
+
+    for name in ("dark_looming", "dark_translating"):
+        tr = SDNF().run(small_stimulus(name, size=96).frames())
+        (alerts,) = SDNF.sweep_alerts(tr, [SDNF.sweep_default()])
+        assert np.array_equal(alerts, tr.spike)

@@ -181,6 +181,24 @@ class LGMDFamily(Model):
 
     output_name = "K"
 
+    #: Threshold sweep (experiments): the spike count at which the alert fires.
+    sweep_parameter = "n_ts (alert while spike count >= value)"
+    sweep_values = tuple(float(v) for v in range(1, 21))
+
+    @classmethod
+    def sweep_default(cls) -> float:
+        return float(cls.params_type().n_ts)
+
+    @classmethod
+    def sweep_alerts(cls, trace: Any, values: Any) -> list[np.ndarray]:
+        """Alerts per frame at each count threshold, from the saved ``count`` diagnostic.
+
+        The spike count does not depend on the threshold, so ``count >= n_ts``
+        on the saved trace is exactly what a rerun with that ``n_ts`` gives.
+        """
+        count = np.asarray(trace.diagnostics["count"], dtype=np.float64)
+        return [count >= v for v in values]
+
     def __init__(self, params: Any = None, *, backend: str = "taichi", arch: str = "cpu", fps: float = 30.0):
         super().__init__(params, backend=backend, arch=arch, fps=fps)
         self.dt = frame_interval_ms(self.fps)

@@ -237,6 +237,35 @@ class SDNF(Model):
         if self._be is not None:
             self._be.reset()
 
+    #: Threshold sweep (experiments): the static alert margin epsilon.
+    sweep_parameter = "epsilon (static threshold 0.5 + value)"
+    sweep_values = tuple(round(0.001 * i, 3) for i in range(0, 21))
+
+    @classmethod
+    def sweep_default(cls) -> float:
+        return float(cls.params_type().epsilon)
+
+    @classmethod
+    def sweep_alerts(cls, trace, values) -> list[np.ndarray]:
+        """Alerts per frame at each ``epsilon``, replaying the dynamic-threshold rule on the saved output.
+
+        The response ``I`` does not depend on ``epsilon``; the rule (``I(t) >
+        max(0.5 + epsilon, I(t-1) + delta)`` on ``n_persist`` consecutive frames)
+        is re-applied exactly as :meth:`step` does.
+        """
+        p = cls.params_type()
+        out = np.asarray(trace.output, dtype=np.float64)
+        result = []
+        for eps in values:
+            prev, run = 0.5, 0
+            alerts = np.zeros(out.shape, dtype=bool)
+            for t, o in enumerate(out):
+                run = run + 1 if o > max(0.5 + eps, prev + p.delta) else 0
+                prev = o
+                alerts[t] = run >= p.n_persist
+            result.append(alerts)
+        return result
+
     def step(self, frame: np.ndarray) -> StepResult:
         p = self.params
         grey = to_grey(frame)
