@@ -114,6 +114,231 @@ class TaichiCDNFBackend:
         }
 
 
+class _LaneWorkspace:
+    """Taichi Vector fields for one frame size, shared by the fast backends of that size.
+
+    The lane kernels take fields as template arguments, so they are compiled once
+    per field set; sharing one set per frame size keeps that to one compile per
+    size. The backend that last used the workspace owns it; another backend of
+    the same size first evicts the owner's state to NumPy (see
+    :class:`LaneTaichiCDNFBackend`).
+    """
+
+    _pool: "dict[tuple[int, int], _LaneWorkspace]" = {}
+
+    def __init__(self, shape: tuple[int, int]):
+        import taichi as ti
+
+        from ..kernels.cdnf import LANES, TILE_ROWS, lane_layout, tile_blocks
+
+        H, W = shape
+        self.e1, self.nb = lane_layout(W)
+        self.bs, self.nblk = tile_blocks(self.e1)
+        self.n_tiles = -(-H // TILE_ROWS) * self.nblk
+
+        def vf():
+            return ti.Vector.field(LANES, ti.f32, shape=(H, self.nb))
+
+        self.L, self.P, self.S = vf(), vf(), vf()
+        self.u_on, self.u_off, self.v = [vf(), vf()], [vf(), vf()], [vf(), vf()]
+        self.row1, self.row2 = vf(), vf()
+        # active-tile bookkeeping of the contrast group ("c") and the Summation field ("s")
+        self.tiles = {}
+        for g in ("c", "s"):
+            self.tiles[g] = dict(act=ti.field(ti.i32, self.n_tiles), chg=ti.field(ti.i32, self.n_tiles),
+                                 lst=ti.field(ti.i32, self.n_tiles), cnt=ti.field(ti.i32, ()))
+        self.owner = None  # weakref to the backend whose state is resident
+
+    def all_active(self) -> None:
+        """Mark every tile of both groups active (after any change made outside the kernels)."""
+        from ..kernels.cdnf import tiles_all
+
+        for t in self.tiles.values():
+            tiles_all(t["act"], t["lst"], t["cnt"])
+
+    @classmethod
+    def get(cls, shape: tuple[int, int]) -> "_LaneWorkspace":
+        ws = cls._pool.get(shape)
+        if ws is None:
+            ws = cls._pool[shape] = cls(shape)
+        return ws
+
+
+class LaneTaichiCDNFBackend:
+    """The fast Taichi backend: fields in lane-vectorised Vector fields (float32).
+
+    Same interface, equations, iteration schedule and residuals as
+    :class:`TaichiCDNFBackend`; the kernels are in :mod:`cdnf_ti.kernels.cdnf`
+    (``lanes_*``). Used when the frame is at least ``2 * LANES`` pixels wide and
+    the DoG radius is below ``LANES``.
+
+    Parameters
+    ----------
+    params : CDNFParams
+    shape : (H, W)
+    arch : str
+    """
+
+    name = "taichi"
+    #: Pixels whose update ``|F(u) - u|`` is at most ``freeze * tol`` keep their value,
+    #: so tiles at rest drop out of the iteration (0: only exactly still pixels).
+    freeze: float = 1.0 / 16.0
+
+    @staticmethod
+    def supports(params: CDNFParams, shape: tuple[int, int]) -> bool:
+        from ..kernels.cdnf import LANES
+
+        return shape[1] >= 2 * LANES and shape[0] >= 2 and int(params.radius_s) < LANES
+
+    def __init__(self, params: CDNFParams, shape: tuple[int, int], arch: str = "cpu"):
+        import weakref
+
+        from ..taichi_runtime import ensure_taichi
+
+        ensure_taichi(arch)
+        from ..kernels import cdnf as K
+        from ..kernels.common import BORDER_CODES
+
+        self.K = K
+        self.params = params
+        self.shape = tuple(shape)
+        self.H, self.W = self.shape
+        self.mode = BORDER_CODES[params.border]
+        self.ws = _LaneWorkspace.get(self.shape)
+        self.bs, self.nblk = self.ws.bs, self.ws.nblk
+        self.tau = float(params.tol) * self.freeze
+        self._ref = weakref.ref(self)
+        # W_c = k k^T with k the normalised 3-tap Gaussian (contrast_kernel is its outer product)
+        k = np.exp(-np.arange(-1, 2) ** 2 / (2.0 * params.sigma_c**2))
+        k /= k.sum()
+        self.k = (float(k[1]), float(k[0]))
+        g1, g2 = dog_profiles(params)
+        self._sum_kernel = K.lanes_summation_kernel(tuple(float(x) for x in g1.astype(np.float32)),
+                                                    tuple(float(x) for x in g2.astype(np.float32)))
+        self.u0 = resting_level(params.h, 1.0)
+        self.v0 = resting_level(params.h, float(params.A * g1.sum() ** 2 - params.B * g2.sum() ** 2))
+        self.c = 0
+        self.s = 0
+        self._saved: dict[str, np.ndarray] | None = None
+        self._rest: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._fresh = True
+        self._acquire()
+
+    # -- workspace ownership -----------------------------------------------
+    _STATE = ("L", "P", "S")
+
+    def _acquire(self) -> "_LaneWorkspace":
+        ws = self.ws
+        owner = ws.owner() if ws.owner is not None else None
+        if owner is self:
+            return ws
+        if owner is not None:
+            owner._evict()
+        ws.owner = self._ref
+        K = self.K
+        if self._fresh:
+            for a in ws.u_on + ws.u_off:
+                K.lanes_fill(a, self.u0)
+            for a in ws.v:
+                K.lanes_fill(a, self.v0)
+            for a in (ws.L, ws.P, ws.S):
+                K.lanes_fill(a, 0.0)
+            for a in ws.u_on + ws.u_off + ws.v:
+                K.lanes_refresh_ghosts(a, self.W, self.mode)
+            self.c = self.s = 0
+            self._fresh = False
+            ws.all_active()
+        elif self._saved is not None:
+            sv = self._saved
+            for name in self._STATE:
+                getattr(ws, name).from_numpy(sv[name])
+            ws.u_on[0].from_numpy(sv["u_on"])
+            ws.u_off[0].from_numpy(sv["u_off"])
+            ws.v[0].from_numpy(sv["v"])
+            self.c = self.s = 0
+            self._saved = None
+            ws.all_active()
+        return ws
+
+    def _evict(self) -> None:
+        ws = self.ws
+        self._saved = {name: getattr(ws, name).to_numpy() for name in self._STATE}
+        self._saved["u_on"] = ws.u_on[self.c].to_numpy()
+        self._saved["u_off"] = ws.u_off[self.c].to_numpy()
+        self._saved["v"] = ws.v[self.s].to_numpy()
+        ws.owner = None
+
+    # -- backend interface ---------------------------------------------------
+    def save_rest(self) -> None:
+        ws = self._acquire()
+        self._rest = (ws.u_on[self.c].to_numpy(), ws.u_off[self.c].to_numpy(), ws.v[self.s].to_numpy())
+
+    def restore_rest(self) -> None:
+        ws = self._acquire()
+        u, _, v = self._rest
+        ws.u_on[self.c].from_numpy(u)
+        ws.u_off[self.c].from_numpy(u)
+        ws.v[self.s].from_numpy(v)
+        ws.all_active()
+
+    def load(self, grey: np.ndarray, first: bool) -> None:
+        ws = self._acquire()
+        scale = 1.0 / 255.0 if grey.dtype == np.uint8 else 1.0
+        t = ws.tiles["c"]
+        self.K.lanes_load_frame(grey, ws.L, ws.P, scale, int(first), self.W, self.bs, self.nblk,
+                                t["act"], t["chg"], t["lst"], t["cnt"])
+
+    def clear_input(self) -> None:
+        ws = self._acquire()
+        self.K.lanes_fill(ws.P, 0.0)
+        ws.all_active()
+
+    def contrast_iterate(self, lam: float) -> tuple[float, float]:
+        ws = self._acquire()
+        c, n = self.c, 1 - self.c
+        t = ws.tiles["c"]
+        r = self.K.lanes_contrast_iterate(ws.P, ws.u_on[c], ws.u_off[c], ws.u_on[n], ws.u_off[n],
+                                          *self.k, self.params.h, lam, self.tau, self.bs, self.nblk,
+                                          t["act"], t["chg"], t["lst"], t["cnt"], self.W, self.mode)
+        self.c = n
+        return float(r[0]), float(r[1])
+
+    def summation_input(self) -> None:
+        ws = self._acquire()
+        p = self.params
+        t = ws.tiles["s"]
+        self.K.lanes_summation_input(ws.u_on[self.c], ws.u_off[self.c], ws.S, p.alpha_on, p.alpha_off,
+                                     THETA_SCALE, self.W, self.bs, self.nblk, t["act"], t["chg"], t["lst"], t["cnt"])
+
+    def summation_iterate(self, lam: float) -> tuple[float]:
+        ws = self._acquire()
+        p = self.params
+        s, n = self.s, 1 - self.s
+        t = ws.tiles["s"]
+        r = self._sum_kernel(ws.S, ws.v[s], ws.row1, ws.row2, ws.v[n], p.A, p.B, p.h, lam, self.tau,
+                             self.bs, self.nblk, t["act"], t["chg"], t["lst"], t["cnt"], self.W, self.mode)
+        self.s = n
+        return (float(r),)
+
+    def mean_activation(self) -> float:
+        ws = self._acquire()
+        return float(self.K.lanes_mean_activation(ws.v[self.s], THETA_SCALE, self.W))
+
+    def _frame(self, x: np.ndarray) -> np.ndarray:
+        from ..kernels.cdnf import LANES
+
+        return np.ascontiguousarray(x.reshape(self.H, -1)[:, LANES:LANES + self.W])
+
+    def fields(self) -> dict[str, np.ndarray]:
+        ws = self._acquire()
+        return {
+            "u_on": self._frame(ws.u_on[self.c].to_numpy()),
+            "u_off": self._frame(ws.u_off[self.c].to_numpy()),
+            "v": self._frame(ws.v[self.s].to_numpy()),
+            "P": self._frame(ws.P.to_numpy()),
+        }
+
+
 class CDNF(Model):
     """Contrast-based Dynamic Neural Field (Qin, Fu, Peng, Yue).
 
@@ -132,6 +357,12 @@ class CDNF(Model):
     fps : float
         Input frame rate (unused by the equations; kept for the interface).
 
+    Notes
+    -----
+    With the Taichi backend, frames at least 32 px wide run on the lane-vectorised
+    kernels with active tiles (:class:`LaneTaichiCDNFBackend`); set ``fast = False``
+    on the instance before its first frame to use the generic ndarray kernels.
+
     Examples
     --------
     >>> from cdnf_ti import CDNF
@@ -143,6 +374,8 @@ class CDNF(Model):
     output_name = "I_v"
     params_type = CDNFParams
     description = "C-DNF: ON/OFF contrast DNFs + Summation DNF (Qin et al.)"
+    #: Use the lane-vectorised kernels where the frame allows (False: the generic ndarray kernels).
+    fast: bool = True
 
     def __init__(self, params: CDNFParams | None = None, *, backend: str = "taichi", arch: str = "cpu",
                  fps: float = 30.0):
@@ -160,7 +393,9 @@ class CDNF(Model):
 
     def _make_backend(self, shape: tuple[int, int]) -> None:
         p = self.params
-        if self.backend_name == "taichi":
+        if self.backend_name == "taichi" and self.fast and LaneTaichiCDNFBackend.supports(p, shape):
+            be = LaneTaichiCDNFBackend(p, shape, self.arch)
+        elif self.backend_name == "taichi":
             be = TaichiCDNFBackend(p, shape, self.arch)
         else:
             be = NumpyCDNFBackend(p, shape)

@@ -1,0 +1,80 @@
+"""The benchmark peers (SciPy, OpenCV+NumPy) compute the same C-DNF as the reference."""
+import numpy as np
+import pytest
+
+from cdnf_ti import CDNF, CDNFParams
+from cdnf_ti.bench.inputs import basic_frames, standin_video
+from cdnf_ti.bench.peers import PeerCDNF, available_peers
+
+from conftest import small_stimulus
+
+PEERS = ["scipy", "opencv"]
+
+
+@pytest.mark.parametrize("peer", PEERS)
+@pytest.mark.parametrize("border", ["replicate", "reflect", "zero"])
+def test_peer_agrees_with_reference_on_a_basic_stimulus(peer, border):
+    frames = list(small_stimulus("light_looming", size=70).frames())
+    p = CDNFParams(border=border)
+    a = PeerCDNF(peer, p).run(frames)
+    b = CDNF(p, backend="numpy").run(frames)
+    assert np.max(np.abs(a.output - b.output)) < 1e-4
+    assert np.array_equal(a.spike, b.spike)
+    assert a.converged.all()
+    assert b.output.max() > 0.5 + p.epsilon  # the stimulus does alert
+
+
+@pytest.mark.parametrize("peer", PEERS)
+def test_peer_agrees_with_reference_on_dashcam_like_video(peer):
+    frames = [f[::2, ::2] for f in standin_video(6, seed=2)]
+    a = PeerCDNF(peer).run(frames)
+    b = CDNF(backend="numpy").run(frames)
+    assert np.max(np.abs(a.output - b.output)) < 1e-4
+    # same fixed-point schedule as the reference (warm start, same stopping rule)
+    assert np.max(np.abs(a.diagnostics["iterations_on"] - b.diagnostics["iterations_on"])) <= 1
+
+
+def test_peers_needing_missing_libraries_are_a_clear_error():
+    with pytest.raises(ValueError, match="not available"):
+        PeerCDNF("no_such_peer")
+
+
+def test_scipy_and_opencv_peers_are_available_here():
+    assert {"scipy", "opencv"} <= set(available_peers())
+
+
+def test_standin_video_is_deterministic_and_moves_everywhere():
+    a = standin_video(3, height=60, width=80, seed=5)
+    b = standin_video(3, height=60, width=80, seed=5)
+    assert all(np.array_equal(x, y) for x, y in zip(a, b))
+    assert a[0].shape == (60, 80) and a[0].dtype == np.uint8
+    moved = np.abs(a[1].astype(int) - a[0].astype(int)) > 0
+    assert moved.mean() > 0.5  # camera ego-motion: most pixels change
+
+
+def test_basic_frames_take_the_requested_size_and_count():
+    fr = basic_frames("dark_looming", 4, height=48, width=64)
+    assert len(fr) == 4 and fr[0].shape == (48, 64)
+
+
+def test_bench_command_prints_one_row_per_model_and_peer(capsys):
+    from cdnf_ti.run import main
+
+    rc = main(["bench", "--quick", "--frames", "3", "--sizes", "48x40", "--no-reference"])
+    out = capsys.readouterr().out
+    assert rc == 0
+    header = out.splitlines()[0]
+    assert "frames/s" in header and "x opencv" in header and "x scipy" in header
+    rows = [line for line in out.splitlines() if line.startswith("| cdnf")]
+    # basic + real footage, each: the model and its two peers
+    assert len(rows) == 6
+    assert sum("cdnf[opencv]" in r for r in rows) == 2
+
+
+def test_bench_command_rejects_a_missing_clip_with_one_line(capsys):
+    from cdnf_ti.run import main
+
+    rc = main(["bench", "--clip", "/nonexistent/clip.mp4"])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert err.startswith("error: /nonexistent/clip.mp4:") and err.count("\n") == 1
