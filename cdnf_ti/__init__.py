@@ -11,6 +11,17 @@ import os as _os
 
 _os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")  # keep CLI output clean
 
+# Installed, the top-level folders kernels/, stimuli/ and bench/ of the repository become
+# cdnf_ti.kernels, cdnf_ti.stimuli and cdnf_ti.bench (setuptools package-dir). When cdnf_ti is
+# imported straight from a source checkout (e.g. `python -m pytest` in the repository root puts
+# the checkout first on sys.path), let the same names resolve to those folders.
+_here = _os.path.dirname(_os.path.abspath(__file__))
+_root = _os.path.dirname(_here)
+if not _os.path.isdir(_os.path.join(_here, "kernels")) and _os.path.isfile(
+    _os.path.join(_root, "kernels", "__init__.py")
+):
+    __path__.append(_root)  # type: ignore[name-defined]  # noqa: F821
+
 from .errors import InputError
 from .frames import FrameSource, iter_grey, open_source, to_grey
 from .models import (
