@@ -6,14 +6,18 @@ whose one-line message names the file.
 from __future__ import annotations
 
 import os
+import queue
+import threading
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Iterable, Iterator, TypeVar
 
 import cv2
 import numpy as np
 
 from .errors import InputError
+
+T = TypeVar("T")
 
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp")
 
@@ -88,6 +92,9 @@ class FrameSource:
     n_frames: int | None
     shape: tuple[int, int]
     _iter_factory: object = None
+    #: Frames may be decoded on a background thread (file decoding only; generated
+    #: sources that launch Taichi kernels must stay on the caller's thread).
+    background_decode: bool = False
 
     def __iter__(self) -> Iterator[np.ndarray]:
         return self._iter_factory()  # type: ignore[operator]
@@ -145,7 +152,7 @@ def open_video(path: str | os.PathLike) -> FrameSource:
             c.release()
 
     return FrameSource(path, float(fps), count if count > 0 else None, shape,
-                       lambda: _checked(path, gen(), shape))
+                       lambda: _checked(path, gen(), shape), background_decode=True)
 
 
 def open_image_folder(path: str | os.PathLike) -> FrameSource:
@@ -171,7 +178,7 @@ def open_image_folder(path: str | os.PathLike) -> FrameSource:
                                      f"{shape[1]}x{shape[0]} (frame size changed mid-sequence)")
             yield img
 
-    return FrameSource(path, 30.0, len(files), shape, gen)
+    return FrameSource(path, 30.0, len(files), shape, gen, background_decode=True)
 
 
 def open_npy(path: str | os.PathLike) -> FrameSource:
@@ -191,7 +198,7 @@ def open_npy(path: str | os.PathLike) -> FrameSource:
         for t in range(arr.shape[0]):
             yield np.asarray(arr[t])
 
-    return FrameSource(path, 30.0, int(arr.shape[0]), shape, gen)
+    return FrameSource(path, 30.0, int(arr.shape[0]), shape, gen, background_decode=True)
 
 
 def open_source(path: str | os.PathLike) -> FrameSource:
@@ -218,10 +225,77 @@ def open_source(path: str | os.PathLike) -> FrameSource:
     return open_video(p)
 
 
-def iter_grey(source: FrameSource) -> Iterator[np.ndarray]:
-    """Frames of ``source`` converted by :func:`to_grey`, with errors naming the file."""
+def _grey_frames(source: FrameSource) -> Iterator[np.ndarray]:
     for t, f in enumerate(source):
         try:
             yield to_grey(f)
         except ValueError as e:
             raise InputError(source.path, f"frame {t}: {e}") from None
+
+
+def iter_grey(source: FrameSource, prefetch: int = 4) -> Iterator[np.ndarray]:
+    """Frames of ``source`` converted by :func:`to_grey`, with errors naming the file.
+
+    Parameters
+    ----------
+    source : FrameSource
+    prefetch : int
+        For file sources, decode and convert up to this many frames ahead on a
+        background thread, off the model's critical path (0 = decode inline).
+    """
+    frames = _grey_frames(source)
+    if prefetch > 0 and source.background_decode:
+        return prefetched(frames, prefetch)
+    return frames
+
+
+def prefetched(items: Iterable[T], depth: int = 4) -> Iterator[T]:
+    """Iterate ``items`` on a background thread, up to ``depth`` items ahead.
+
+    Items come out in order; an exception raised while producing an item is
+    re-raised in the caller at that point; closing the returned generator early
+    stops the thread. OpenCV decoding releases the GIL, so decode overlaps
+    with the caller's work.
+    """
+    q: queue.Queue = queue.Queue(maxsize=max(1, depth))
+    stop = threading.Event()
+
+    def put(item: tuple) -> bool:
+        while not stop.is_set():
+            try:
+                q.put(item, timeout=0.05)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def work() -> None:
+        try:
+            for x in items:
+                if not put((_ITEM, x)):
+                    return
+            put((_END, None))
+        except BaseException as e:  # noqa: BLE001 - handed to the consumer
+            put((_ERROR, e))
+
+    thread = threading.Thread(target=work, name="cdnf_ti-decode", daemon=True)
+
+    def consume() -> Iterator[T]:
+        thread.start()  # only once iteration begins, so an unused stream leaves no thread
+        try:
+            while True:
+                kind, x = q.get()
+                if kind is _ITEM:
+                    yield x
+                elif kind is _END:
+                    return
+                else:
+                    raise x
+        finally:
+            stop.set()
+            thread.join(timeout=5)
+
+    return consume()
+
+
+_ITEM, _END, _ERROR = object(), object(), object()

@@ -125,3 +125,42 @@ def test_not_a_numpy_file_is_an_error(tmp_path):
     p.write_bytes(b"definitely not numpy")
     with pytest.raises(InputError, match=r"junk\.npy: cannot read"):
         open_source(p)
+
+
+def test_background_decoding_yields_the_same_frames_in_order(tmp_path):
+    path = tmp_path / "clip.avi"
+    write_video(path, _frames(12), fourcc="MJPG")
+    src = open_source(path)
+    inline = list(iter_grey(src, prefetch=0))
+    ahead = list(iter_grey(src, prefetch=3))
+    assert len(ahead) == 12
+    assert all(np.array_equal(a, b) for a, b in zip(inline, ahead))
+
+
+def test_background_decoding_reraises_errors_in_the_caller(tmp_path):
+    np.save(tmp_path / "hot.npy", np.concatenate([np.zeros((2, 8, 8)), np.full((1, 8, 8), 3.0)]).astype(np.float32))
+    it = iter_grey(open_source(tmp_path / "hot.npy"), prefetch=2)
+    assert next(it).shape == (8, 8) and next(it).shape == (8, 8)
+    with pytest.raises(InputError, match=r"hot\.npy: frame 2"):
+        next(it)
+
+
+def test_closing_a_prefetched_stream_early_stops_its_thread():
+    import threading
+
+    from cdnf_ti.frames import prefetched
+
+    produced = []
+
+    def endless():
+        i = 0
+        while True:
+            produced.append(i)
+            yield i
+            i += 1
+
+    it = prefetched(endless(), depth=2)
+    assert [next(it) for _ in range(3)] == [0, 1, 2]
+    it.close()
+    assert not any(t.name == "cdnf_ti-decode" and t.is_alive() for t in threading.enumerate())
+    assert len(produced) <= 3 + 2 + 2
