@@ -166,3 +166,20 @@ def test_real_clip_taichi_agrees_with_reference(shared_real):
     b = CDNF(backend="numpy").run(frames)
     assert a.converged.all()
     assert np.max(np.abs(a.output - b.output)) < 1e-4
+
+
+@pytest.mark.parametrize("backend", ["taichi", "numpy"])
+def test_contrast_over_relaxation_reaches_the_same_answer_in_fewer_iterations(backend):
+    plain = _run("light_looming", backend, CDNFParams())
+    sor = _run("light_looming", backend, CDNFParams(contrast_relaxation=4 / 3))
+    assert sor.converged.all()
+    assert np.max(np.abs(sor.output - plain.output)) < 1e-5
+    busy = plain.diagnostics["iterations_on"] > 5  # frames with ON input (others converge at once)
+    assert busy.sum() > 5
+    assert sor.diagnostics["iterations_on"][busy].sum() < 0.85 * plain.diagnostics["iterations_on"][busy].sum()
+
+
+@pytest.mark.parametrize("bad", [0.0, 2.0, -1.0])
+def test_contrast_relaxation_outside_0_2_is_rejected(bad):
+    with pytest.raises(ValueError, match="contrast_relaxation"):
+        CDNFParams(contrast_relaxation=bad)

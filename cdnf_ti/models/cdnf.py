@@ -407,11 +407,10 @@ class CDNF(Model):
 
     def _solve(self, be) -> tuple[SolveReport, SolveReport]:
         p = self.params
-        kw = dict(tol=p.tol, max_iter=p.max_iter, damping=p.damping, min_damping=p.min_damping,
-                  stall_patience=p.stall_patience)
-        rc = solve_fixed_point(be.contrast_iterate, 2, **kw)
+        kw = dict(tol=p.tol, max_iter=p.max_iter, min_damping=p.min_damping, stall_patience=p.stall_patience)
+        rc = solve_fixed_point(be.contrast_iterate, 2, damping=p.damping * p.contrast_relaxation, **kw)
         be.summation_input()
-        rs = solve_fixed_point(be.summation_iterate, 1, **kw)
+        rs = solve_fixed_point(be.summation_iterate, 1, damping=p.damping, **kw)
         return rc, rs
 
     def reset(self) -> None:
