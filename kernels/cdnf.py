@@ -17,7 +17,9 @@ import functools
 
 import taichi as ti
 
-from .common import REFLECT, REPLICATE, block_span, border_index, border_weight, tanh_rational
+from .common import (
+    REFLECT, REPLICATE, block_span, border_index, border_weight, dog_column_sum, dog_row_pass, tanh_rational,
+)
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
@@ -119,32 +121,14 @@ def summation_iterate(
     mode). ``F(v) = S - h + vartheta(W_s (*) v)``; returns ``max|F(v) - v|``.
     """
     H, W = v.shape[0], v.shape[1]
-    R = (g1.shape[0] - 1) // 2
-    for k in range(H * blocks):
-        i, j0, j1 = block_span(k, W, blocks)
-        for j in range(j0, j1):
-            a1 = 0.0
-            a2 = 0.0
-            for d in range(-R, R + 1):
-                jj = border_index(j + d, W, mode)
-                x = border_weight(j + d, W, mode) * v[i, jj]
-                a1 += g1[d + R] * x
-                a2 += g2[d + R] * x
-            row1[i, j] = a1
-            row2[i, j] = a2
+    dog_row_pass(v, row1, row2, g1, g2, blocks, mode)
     res = 0.0
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
         m = 0.0
         for j in range(j0, j1):
-            b1 = 0.0
-            b2 = 0.0
-            for d in range(-R, R + 1):
-                ii = border_index(i + d, H, mode)
-                wgt = border_weight(i + d, H, mode)
-                b1 += g1[d + R] * wgt * row1[ii, j]
-                b2 += g2[d + R] * wgt * row2[ii, j]
-            dv = S[i, j] - h + tanh_rational(0.5 * (A * b1 - B * b2)) - v[i, j]
+            lateral = dog_column_sum(row1, row2, g1, g2, A, B, i, j, mode)
+            dv = S[i, j] - h + tanh_rational(0.5 * lateral) - v[i, j]
             out[i, j] = v[i, j] + lam * dv
             m = ti.max(m, ti.abs(dv))
         ti.atomic_max(res, m)

@@ -10,7 +10,7 @@ as separable row/column passes with a replicate border. NumPy float64 oracle:
 
 import taichi as ti
 
-from .common import block_span, tanh_rational
+from .common import REPLICATE, block_span, dog_column_sum, dog_row_pass, tanh_rational
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
@@ -63,30 +63,13 @@ def field_update(
     interaction); ``vartheta(a) = tanh(a / 2)``.
     """
     H, W = F.shape[0], F.shape[1]
-    R = (g1.shape[0] - 1) // 2
-    for k in range(H * blocks):
-        i, j0, j1 = block_span(k, W, blocks)
-        for j in range(j0, j1):
-            a1 = 0.0
-            a2 = 0.0
-            for d in range(-R, R + 1):
-                x = F[i, ti.min(ti.max(j + d, 0), W - 1)]
-                a1 += g1[d + R] * x
-                a2 += g2[d + R] * x
-            row1[i, j] = a1
-            row2[i, j] = a2
+    dog_row_pass(F, row1, row2, g1, g2, blocks, REPLICATE)
     total = ti.f64(0.0)
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
         acc = ti.f64(0.0)
         for j in range(j0, j1):
-            b1 = 0.0
-            b2 = 0.0
-            for d in range(-R, R + 1):
-                ii = ti.min(ti.max(i + d, 0), H - 1)
-                b1 += g1[d + R] * row1[ii, j]
-                b2 += g2[d + R] * row2[ii, j]
-            v = E[i, j] - h + tanh_rational(0.5 * (A * b1 - B_t * b2))
+            v = E[i, j] - h + tanh_rational(0.5 * dog_column_sum(row1, row2, g1, g2, A, B_t, i, j, REPLICATE))
             u_new[i, j] = v
             f = _act(v, theta_scale)
             F_new[i, j] = f
