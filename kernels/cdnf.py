@@ -17,8 +17,9 @@ import functools
 
 import taichi as ti
 
-from .common import (
-    REFLECT, REPLICATE, block_span, border_index, border_weight, dog_column_sum, dog_row_pass, tanh_rational,
+from .common import (  # noqa: F401 - fill is part of this module's kernel set
+    REFLECT, REPLICATE, block_span, border_index, border_weight, dog_column_sum, dog_row_pass, fill,
+    tanh_rational,
 )
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
@@ -33,13 +34,6 @@ def load_frame(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, scale: ti.f32, fir
         g = ti.cast(frame[i, j], ti.f32) * scale
         P[i, j] = ti.select(first != 0, 0.0, g - L[i, j])
         L[i, j] = g
-
-
-@ti.kernel
-def fill(x: F2, value: ti.f32):
-    """Set every element of ``x`` to ``value``."""
-    for i, j in x:
-        x[i, j] = value
 
 
 @ti.kernel

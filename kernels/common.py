@@ -2,6 +2,8 @@
 
 import taichi as ti
 
+F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
+
 REPLICATE, REFLECT, ZERO = 0, 1, 2
 BORDER_CODES = {"replicate": REPLICATE, "reflect": REFLECT, "zero": ZERO}
 
@@ -101,3 +103,10 @@ def dog_column_sum(row1: ti.template(), row2: ti.template(), g1: ti.template(), 
         b1 += g1[d + R] * wgt * row1[ii, j]
         b2 += g2[d + R] * wgt * row2[ii, j]
     return A * b1 - B * b2
+
+
+@ti.kernel
+def fill(x: F2, value: ti.f32):
+    """Set every element of ``x`` to ``value``."""
+    for i, j in x:
+        x[i, j] = value

@@ -12,7 +12,7 @@ The NumPy float64 oracle of every stage is :mod:`cdnf_ti.baselines_reference`.
 
 import taichi as ti
 
-from .common import block_span
+from .common import block_span, fill  # noqa: F401 - fill is part of this module's kernel set
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 VEC2D = ti.types.vector(2, ti.f64)
@@ -110,13 +110,6 @@ def load_frame(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, scale: ti.f32, fir
             acc += ti.cast(ti.abs(p), ti.f64)
         ti.atomic_add(total, acc)
     return total
-
-
-@ti.kernel
-def fill(x: F2, value: ti.f32):
-    """Set every element of ``x`` to ``value``."""
-    for i, j in x:
-        x[i, j] = value
 
 
 @ti.kernel

@@ -10,7 +10,7 @@ as separable row/column passes with a replicate border. NumPy float64 oracle:
 
 import taichi as ti
 
-from .common import REPLICATE, block_span, dog_column_sum, dog_row_pass, tanh_rational
+from .common import REPLICATE, block_span, dog_column_sum, dog_row_pass, fill, tanh_rational  # noqa: F401
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
@@ -36,13 +36,6 @@ def load_binary(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, E: F2, scale: ti.
             acc += ti.cast(e, ti.f64)
         ti.atomic_add(total, acc)
     return total
-
-
-@ti.kernel
-def fill(x: F2, value: ti.f32):
-    """Set every element of ``x`` to ``value``."""
-    for i, j in x:
-        x[i, j] = value
 
 
 @ti.func

@@ -9,7 +9,7 @@ NumPy float64 references of the same equations live next to their callers
 
 import taichi as ti
 
-from .common import REFLECT, block_span, border_index
+from .common import REFLECT, block_span, border_index, fill
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
@@ -44,13 +44,6 @@ def scatter_state(idx: I1, value: ti.i8, state: B2):
     for n in range(idx.shape[0]):
         p = idx[n]
         state[p // W, p % W] = value
-
-
-@ti.kernel
-def fill2(x: F2, value: ti.f32):
-    """Set every element of ``x`` to ``value``."""
-    for i, j in x:
-        x[i, j] = value
 
 
 @ti.kernel

@@ -219,7 +219,7 @@ class _TaichiRain:
         self.noise = np.zeros(shape[0] * COLUMN_BLOCKS, dtype=np.float64)
 
     def layer_for(self, drops: Drops, params: RainParams) -> "object":
-        self.K.fill2(self.layer, 0.0)
+        self.K.fill(self.layer, 0.0)
         if drops.row0.size:
             self.K.draw_streaks(drops.row0, drops.col0, drops.slope, int(params.length), int(params.width),
                                 float(np.float32(params.grey)), self.layer)
@@ -322,7 +322,7 @@ class RainyFrames:
             if blur:
                 yield e.layer_for(drops, p).to_numpy()
             else:
-                e.K.fill2(e.layer, 0.0)
+                e.K.fill(e.layer, 0.0)
                 if drops.row0.size:
                     e.K.draw_streaks(drops.row0, drops.col0, drops.slope, int(p.length), int(p.width),
                                      float(np.float32(p.grey)), e.layer)
