@@ -88,6 +88,23 @@ def _box(x: ti.template(), i, j, H, W):
 
 
 @ti.func
+def _group(S: ti.template(), G: ti.template(), blocks):
+    """Grouping ``G = S (*) (1/9 ones 3x3)`` over the frame (a top-level parallel loop);
+    returns ``sum G`` accumulated in float64."""
+    H, W = S.shape[0], S.shape[1]
+    total = ti.f64(0.0)
+    for k in range(H * blocks):
+        i, j0, j1 = block_span(k, W, blocks)
+        acc = ti.f64(0.0)
+        for j in range(j0, j1):
+            g = _box(S, i, j, H, W)
+            G[i, j] = g
+            acc += ti.cast(g, ti.f64)
+        ti.atomic_add(total, acc)
+    return total
+
+
+@ti.func
 def _gauss3(x: ti.template(), i, j, H, W, g0, g1, g2):
     e, d = _edge_diag(x, i, j, H, W)
     return g0 * x[i, j] + g1 * e + g2 * d
@@ -192,16 +209,7 @@ def lgmd1_layers(
             s_off = e_o - w_i_off * x_off
             s = e_on * s_on + e_off * s_off + e_onoff * s_on * s_off
             S[i, j] = ti.select(s >= t_s, s, 0.0)
-    total = ti.f64(0.0)
-    for k in range(H * blocks):
-        i, j0, j1 = block_span(k, W, blocks)
-        acc = ti.f64(0.0)
-        for j in range(j0, j1):
-            g = _box(S, i, j, H, W)
-            G[i, j] = g
-            acc += ti.cast(g, ti.f64)
-        ti.atomic_add(total, acc)
-    return total
+    return _group(S, G, blocks)
 
 
 @ti.kernel
@@ -282,13 +290,4 @@ def flgmd_finish(
             S_off[i, j] = b
             s = a + b
             S[i, j] = ti.select(s >= t_s, s, 0.0)
-    total = ti.f64(0.0)
-    for k in range(H * blocks):
-        i, j0, j1 = block_span(k, W, blocks)
-        acc = ti.f64(0.0)
-        for j in range(j0, j1):
-            g = _box(S, i, j, H, W)
-            G[i, j] = g
-            acc += ti.cast(g, ti.f64)
-        ti.atomic_add(total, acc)
-    return total
+    return _group(S, G, blocks)
