@@ -86,6 +86,7 @@ def run_videos(argv: Sequence[str]) -> int:
     from .frames import iter_grey
     from .inputs import resolve_input
     from .models import create_model
+    from .models.base import run_models
     from .params import CDNFParams
 
     args = _videos_parser().parse_args(argv)
@@ -109,26 +110,26 @@ def run_videos(argv: Sequence[str]) -> int:
             failed += 1
             summary.append({"clip": Path(path).stem, "status": f"error: {e.problem}"})
             continue
-        for name in models:
-            params = None
-            if name == "cdnf" and args.epsilon is not None:
-                params = CDNFParams(epsilon=args.epsilon)
-            model = create_model(name, params, backend=args.backend, arch=args.arch, fps=src.fps)
-            try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    frames = iter_grey(src)
-                    rain = None
-                    if rain_params is not None:
-                        rain = RainyFrames(frames, rain_params, seed=args.rain_seed)
-                        frames = iter(rain)
-                    trace = model.run(frames, progress=False if args.no_progress else f"{src.name} [{name}]",
-                                      total=src.n_frames)
-            except InputError as e:
-                print(f"error: {e}", file=sys.stderr)
-                failed += 1
-                summary.append({"clip": src.name, "model": name, "status": f"error: {e.problem}"})
-                break
+        params = CDNFParams(epsilon=args.epsilon) if args.epsilon is not None else None
+        instances = [create_model(name, params if name == "cdnf" else None, backend=args.backend,
+                                  arch=args.arch, fps=src.fps) for name in models]
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                frames = iter_grey(src)
+                rain = None
+                if rain_params is not None:
+                    rain = RainyFrames(frames, rain_params, seed=args.rain_seed)
+                    frames = iter(rain)
+                # one pass over the input: each frame is decoded (and rained on) once for all models
+                traces = run_models(instances, frames, total=src.n_frames,
+                                    progress=False if args.no_progress else f"{src.name} [{', '.join(models)}]")
+        except InputError as e:
+            print(f"error: {e}", file=sys.stderr)
+            failed += 1
+            summary.append({"clip": src.name, "model": ",".join(models), "status": f"error: {e.problem}"})
+            continue
+        for name, trace in zip(models, traces):
             trace.to_csv(out / f"{src.name}.{name}.csv")
             fa = trace.first_alert
             fa_txt = f"{fa} ({fa / src.fps:.2f} s)" if fa is not None else "none"

@@ -59,7 +59,8 @@ class Trace:
     output, spike, converged : ndarray, shape (T,)
     diagnostics : dict of str to ndarray, shape (T,)
     seconds : float
-        Wall time spent in the model (s), excluding frame decoding.
+        Wall time spent in the model's steps (s), excluding frame decoding and
+        the first frame (which allocates the model's state and compiles kernels).
     """
 
     model: str
@@ -83,8 +84,8 @@ class Trace:
 
     @property
     def fps(self) -> float:
-        """Model throughput in frames per second."""
-        return self.n_frames / self.seconds if self.seconds > 0 else float("inf")
+        """Model throughput in frames per second (frames after the first / ``seconds``)."""
+        return (self.n_frames - 1) / self.seconds if self.seconds > 0 and self.n_frames > 1 else float("nan")
 
     @classmethod
     def from_steps(cls, model: "Model", steps: list[StepResult], seconds: float) -> "Trace":
@@ -202,31 +203,63 @@ class Model(ABC):
         total : int, optional
             Number of frames, for the progress bar.
         """
-        self.reset()
-        steps: list[StepResult] = []
-        it = frames
-        bar = None
-        if progress:
-            from tqdm import tqdm
+        return run_models([self], frames, progress=progress, total=total)[0]
 
-            bar = tqdm(total=total, desc=progress if isinstance(progress, str) else self.name,
-                       unit="frame", leave=False, disable=None)
-        seconds = 0.0
-        for frame in it:
-            t0 = time.perf_counter()
-            steps.append(self.step(frame))
-            seconds += time.perf_counter() - t0
+
+def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bool | str = False,
+               total: int | None = None) -> list[Trace]:
+    """Reset several models and step them all through one pass over ``frames``.
+
+    Each frame is decoded (and e.g. rain is generated) once and handed to every
+    model in turn; each model's time is measured separately.
+
+    Parameters
+    ----------
+    models : list of Model
+    frames : iterable of ndarray
+        Frame stream (consumed lazily).
+    progress : bool or str
+        Show a tqdm progress bar (a string is used as its label).
+    total : int, optional
+        Number of frames, for the progress bar.
+
+    Returns
+    -------
+    list of Trace
+        One per model, in order.
+    """
+    for m in models:
+        m.reset()
+    steps: list[list[StepResult]] = [[] for _ in models]
+    seconds = [0.0] * len(models)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=total, desc=progress if isinstance(progress, str) else models[0].name,
+                   unit="frame", leave=False, disable=None)
+    try:
+        for frame in frames:
+            for k, m in enumerate(models):
+                t0 = time.perf_counter()
+                steps[k].append(m.step(frame))
+                if len(steps[k]) > 1:  # the first step allocates state and compiles kernels
+                    seconds[k] += time.perf_counter() - t0
             if bar is not None:
                 bar.update(1)
+    finally:
         if bar is not None:
             bar.close()
-        trace = Trace.from_steps(self, steps, seconds)
+    traces = []
+    for k, m in enumerate(models):
+        trace = Trace.from_steps(m, steps[k], seconds[k])
         n_bad = int((~trace.converged).sum())
         if n_bad:
             warnings.warn(
-                f"{self.name}: {n_bad} of {trace.n_frames} frames did not reach the tolerance "
+                f"{m.name}: {n_bad} of {trace.n_frames} frames did not reach the tolerance "
                 "(see the 'converged' column)",
                 NotConvergedWarning,
-                stacklevel=2,
+                stacklevel=3,
             )
-        return trace
+        traces.append(trace)
+    return traces
