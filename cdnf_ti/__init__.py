@@ -10,6 +10,8 @@ Quick start::
 import os as _os
 
 _os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")  # keep CLI output clean
+_os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")  # FFmpeg's own messages on bad files; we report them
+_os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")
 
 # Installed, the top-level folders kernels/, stimuli/ and bench/ of the repository become
 # cdnf_ti.kernels, cdnf_ti.stimuli and cdnf_ti.bench (setuptools package-dir). When cdnf_ti is

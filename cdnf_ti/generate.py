@@ -20,12 +20,13 @@ from typing import Sequence
 
 from . import __version__
 from .errors import InputError
+from .run import seed_arg
 
 
 def _add_rain_options(ap: argparse.ArgumentParser, flag: bool) -> None:
     if flag:
         ap.add_argument("--rain", action="store_true", help="add synthetic rain (paper defaults)")
-    ap.add_argument("--rain-seed", type=int, default=0, help="rain seed (default: %(default)s)")
+    ap.add_argument("--rain-seed", type=seed_arg, default=0, help="rain seed (default: %(default)s)")
     ap.add_argument("--rain-drops", type=int, default=None,
                     help="droplets per frame (default: 500 per 426x240, scaled by area)")
 
@@ -49,7 +50,7 @@ def generate_main(argv: Sequence[str]) -> int:
                                              "(FFV1 .avi, or a PNG folder) with a JSON sidecar.")
     ap.add_argument("name", choices=BASIC_STIMULI, metavar="NAME", help=f"one of: {', '.join(BASIC_STIMULI)}")
     ap.add_argument("--coherence", type=float, default=1.0, help="coherence degree c in (0, 1] (default 1)")
-    ap.add_argument("--seed", type=int, default=0, help="seed of the incoherent displacement (default 0)")
+    ap.add_argument("--seed", type=seed_arg, default=0, help="seed of the incoherent displacement (default 0)")
     ap.add_argument("--size", type=int, default=None,
                     help="frame height = width in px (default 600); start half-size scales as size/60")
     ap.add_argument("--height", type=int, default=None)
@@ -110,7 +111,7 @@ def rain_main(argv: Sequence[str]) -> int:
                                              "DIR/<clip>_rain.avi (or PNG folders) plus JSON sidecars with the SNR.")
     ap.add_argument("inputs", nargs="+", metavar="VIDEO", help="video file, image folder, .npy, or stim:NAME?...")
     ap.add_argument("--out", required=True, help="output folder")
-    ap.add_argument("--seed", type=int, default=0, help="rain seed (default: %(default)s)")
+    ap.add_argument("--seed", type=seed_arg, default=0, help="rain seed (default: %(default)s)")
     ap.add_argument("--drops", type=int, default=None,
                     help="droplets per frame (default: 500 per 426x240, scaled by area)")
     ap.add_argument("--format", choices=("avi", "png"), default="avi", help="FFV1 AVI (default) or PNG folders")

@@ -46,6 +46,17 @@ def add_model_options(ap: argparse.ArgumentParser, default_models: str = "cdnf")
                     help="Taichi architecture (default: cpu)")
 
 
+def seed_arg(text: str) -> int:
+    """argparse type for seeds: a non-negative integer."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {text!r}")
+    return value
+
+
 def parse_models(spec: str) -> list[str]:
     """``"cdnf,lgmd2"`` -> registry names; ``"all"`` -> every registered model."""
     from .models import MODELS, get_model_class
@@ -74,7 +85,7 @@ def _videos_parser() -> argparse.ArgumentParser:
     ap.add_argument("--no-progress", action="store_true", help="hide progress bars")
     ap.add_argument("--rain", action="store_true",
                     help="add synthetic rain (paper defaults) in memory; prints each video's SNR")
-    ap.add_argument("--rain-seed", type=int, default=0, help="rain seed (default: %(default)s)")
+    ap.add_argument("--rain-seed", type=seed_arg, default=0, help="rain seed (default: %(default)s)")
     ap.add_argument("--rain-drops", type=int, default=None,
                     help="rain droplets per frame (default: 500 per 426x240, scaled by area)")
     return ap
@@ -92,6 +103,7 @@ def run_videos(argv: Sequence[str]) -> int:
     args = _videos_parser().parse_args(argv)
     models = parse_models(args.models)
     out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)  # fail before any work if the folder cannot be made
     failed = 0
     rain_params = None
     if args.rain:
@@ -173,6 +185,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE
     except BackendUnavailableError as e:
         print(f"error: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    except OSError as e:  # e.g. an output folder that cannot be created or written
+        where = e.filename if e.filename is not None else "output"
+        print(f"error: {where}: {e.strerror or e}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

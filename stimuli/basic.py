@@ -9,6 +9,7 @@
 """
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 from typing import Iterator
 
@@ -73,10 +74,17 @@ class BasicStimulus:
             raise ValueError(f"unknown stimulus {self.name!r}; choose one of {', '.join(BASIC_STIMULI)}")
         if self.height < 8 or self.width < 8:
             raise ValueError(f"frame must be at least 8x8 px, got {self.width}x{self.height}")
+        for name in ("fps", "duration", "start_half_size"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"{name} must be finite, got {getattr(self, name)}")
         if not (self.fps > 0 and self.duration > 0):
             raise ValueError("fps and duration must be > 0")
+        if self.duration * self.fps > 1_000_000:
+            raise ValueError(f"duration x fps = {self.duration * self.fps:g} frames is too many (max 1e6)")
         if self.end_half_size is None:
             object.__setattr__(self, "end_half_size", 0.45 * min(self.height, self.width))
+        if not math.isfinite(self.end_half_size):
+            raise ValueError(f"end_half_size must be finite, got {self.end_half_size}")
         if self.bar_width is None:
             object.__setattr__(self, "bar_width", max(1, int(round(self.width / 10))))
         if not (0 < self.start_half_size < self.end_half_size):
@@ -149,6 +157,17 @@ class BasicStimulus:
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+
+def check_seed(seed: object) -> int:
+    """Return ``seed`` as an int, or raise ``ValueError`` unless it is a non-negative integer."""
+    try:
+        value = int(seed)  # type: ignore[call-overload]
+    except (TypeError, ValueError):
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}") from None
+    if value != seed or value < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    return value
 
 
 def basic_stimulus(name: str, **params) -> BasicStimulus:

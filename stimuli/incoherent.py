@@ -46,7 +46,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-from .basic import BASIC_STIMULI, BasicStimulus, basic_stimulus
+from .basic import BASIC_STIMULI, BasicStimulus, basic_stimulus, check_seed
 
 BACKGROUND, KEPT, DISPLACED, TARGET = 0, 1, 2, 3
 BACKENDS = ("taichi", "numpy")
@@ -122,7 +122,7 @@ class IncoherentStimulus:
             raise ValueError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
         self.base = base
         self.coherence = coherence
-        self.seed = int(seed)
+        self.seed = check_seed(seed)
         self.backend = backend
         self.held_frames = 0
         self._forward: IncoherentStimulus | None = None

@@ -100,6 +100,14 @@ def write_frames(frames: Iterable[np.ndarray], path: str | os.PathLike, fps: flo
                         writer.release()
                 if count == 0:
                     raise ValueError(f"{path}: no frames to write")
+                check = cv2.VideoCapture(tmp)  # the container must hold every frame at this fps
+                stored = int(check.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+                stored_fps = float(check.get(cv2.CAP_PROP_FPS) or 0.0)
+                check.release()
+                if stored != count or abs(stored_fps - float(fps)) > 1e-3 * float(fps):
+                    raise InputError(path, f"the AVI holds {stored} frames at {stored_fps:g} fps instead of "
+                                           f"{count} at {float(fps):g} fps (frame rate not representable); "
+                                           "write PNG frames (a folder name) instead")
 
             atomic_write(path, write)
         else:

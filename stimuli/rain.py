@@ -29,6 +29,7 @@ from typing import Iterable, Iterator
 import numpy as np
 
 from ..frames import to_grey
+from .basic import check_seed
 
 #: The paper's frame size for 500 droplets per frame (height, width).
 REFERENCE_SHAPE = (240, 426)
@@ -273,7 +274,7 @@ class RainyFrames:
             raise ValueError(f"unknown backend {backend!r}; choose taichi or numpy")
         self.frames = frames
         self.params = params or RainParams()
-        self.seed = int(seed)
+        self.seed = check_seed(seed)
         self.backend = backend
         self.snr_per_frame: list[float] = []
         self._engine: _TaichiRain | None = None

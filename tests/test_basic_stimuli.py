@@ -64,3 +64,23 @@ def test_translating_bar_is_a_tenth_wide_full_height_and_moves_at_constant_speed
 def test_invalid_stimulus_parameters_raise(kw):
     with pytest.raises(ValueError):
         BasicStimulus(**kw)
+
+
+@pytest.mark.parametrize("kw", [{"fps": float("inf")}, {"duration": float("nan")}, {"start_half_size": float("inf")}])
+def test_non_finite_stimulus_parameters_raise(kw):
+    with pytest.raises(ValueError, match="finite|> 0"):
+        BasicStimulus(**kw)
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, "x"])
+def test_seeds_must_be_non_negative_integers(seed):
+    from cdnf_ti.stimuli.basic import check_seed
+    from cdnf_ti.stimuli.incoherent import incoherent_stimulus
+    from cdnf_ti.stimuli.rain import RainyFrames
+
+    with pytest.raises(ValueError, match="seed"):
+        check_seed(seed)
+    with pytest.raises(ValueError, match="seed"):
+        incoherent_stimulus("dark_looming", 0.5, seed=seed, height=32, width=32, start_half_size=1)
+    with pytest.raises(ValueError, match="seed"):
+        RainyFrames([np.zeros((8, 8), np.float32)], seed=seed)

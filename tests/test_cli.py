@@ -92,3 +92,37 @@ def test_unavailable_gpu_arch_is_a_clear_error_with_exit_code_2(looming_npy, tmp
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
     assert "'cuda' is not available" in proc.stderr
+
+
+def test_output_folder_that_is_a_file_is_a_one_line_error_before_any_work(looming_npy, tmp_path, capsys):
+    blocker = tmp_path / "afile"
+    blocker.write_text("x")
+    assert main([str(looming_npy), "--out", str(blocker)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {blocker}")
+
+
+def test_result_files_are_readable_by_others(looming_npy, tmp_path):
+    import os
+    import stat
+
+    out = tmp_path / "o"
+    old = os.umask(0o022)
+    try:
+        assert main([str(looming_npy), "--out", str(out)]) == 0
+    finally:
+        os.umask(old)
+    mode = stat.S_IMODE((out / "looming.cdnf.csv").stat().st_mode)
+    assert mode == 0o644
+
+
+def test_negative_seed_option_is_rejected_with_exit_code_2(looming_npy, tmp_path, capsys):
+    with pytest.raises(SystemExit) as e:
+        main([str(looming_npy), "--rain", "--rain-seed", "-2", "--out", str(tmp_path / "o")])
+    assert e.value.code == 2
+    assert "--rain-seed" in capsys.readouterr().err
+
+
+def test_dataset_given_a_file_instead_of_a_folder_says_so(looming_npy, tmp_path, capsys):
+    assert main(["dataset", str(looming_npy), "--out", str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err.strip() == f"error: {looming_npy}: not a folder (give the folder that holds the videos and labels.csv)"

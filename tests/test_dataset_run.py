@@ -192,3 +192,20 @@ def test_rain_condition_is_deterministic_and_reports_snr(dataset, tmp_path):
     ta = _traces(tmp_path / "a")
     assert ta["traces/rain/dark_looming.cdnf.csv"] != ta["traces/clean/dark_looming.cdnf.csv"]
     assert a.summary["mean_rain_snr_db"] == pytest.approx(rain["snr_db"])
+
+
+def test_rerun_with_other_options_recomputes_instead_of_reusing(dataset, tmp_path):
+    kw = dict(models=["cdnf"], rain="only", workers=0, progress=False, figures=False)
+    ds = tmp_path / "ds"
+    ds.mkdir()
+    shutil.copy(dataset / "dark_looming.avi", ds)
+    (ds / "labels.csv").write_text("clip,label,window_start,window_end\ndark_looming,collision,32,45\n")
+    out = tmp_path / "o"
+    first = run_dataset(ds, None, out, seed=0, **kw)
+    same = run_dataset(ds, None, out, seed=0, **kw)
+    assert (same.ran, same.skipped) == (0, 1)
+    other = run_dataset(ds, None, out, seed=5, **kw)
+    assert (other.ran, other.skipped) == (1, 0)
+    assert other.rows[0]["snr_db"] != first.rows[0]["snr_db"]
+    fresh = run_dataset(ds, None, tmp_path / "fresh", seed=5, **kw)
+    assert _traces(out) == _traces(tmp_path / "fresh")

@@ -87,3 +87,12 @@ def test_generate_bad_coherence_exits_2_without_traceback(tmp_path):
     assert p.returncode == 2
     assert p.stderr.strip().startswith("error:") and "Traceback" not in p.stderr
     assert not (tmp_path / "x.avi").exists()
+
+
+def test_frame_rate_the_avi_cannot_store_is_an_error_not_a_silent_loss(tmp_path, capsys):
+    from cdnf_ti.run import main
+
+    out = tmp_path / "fast.avi"
+    assert main(["generate", "dark_looming", "--size", "40", "--fps", "2000", "--out", str(out)]) == 2
+    assert "frame rate not representable" in capsys.readouterr().err
+    assert not out.exists()

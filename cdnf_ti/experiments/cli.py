@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Sequence
 
 from ..errors import InputError
+from ..run import seed_arg
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 
@@ -30,7 +31,7 @@ def _add_parallel(ap: argparse.ArgumentParser) -> None:
                     help="local worker processes (default: one per CPU core; 0 or 1: run in this process)")
     ap.add_argument("--scheduler", default=None, metavar="ADDRESS",
                     help="Dask distributed scheduler address (e.g. tcp://10.0.0.5:8786): run the tasks there")
-    ap.add_argument("--seed", type=int, default=0, help="random seed (rain, incoherent stimuli; default 0)")
+    ap.add_argument("--seed", type=seed_arg, default=0, help="random seed (rain, incoherent stimuli; default 0)")
     ap.add_argument("--no-progress", action="store_true", help="hide progress bars")
     ap.add_argument("--no-figures", action="store_true", help="do not draw figures")
 
@@ -82,7 +83,12 @@ def dataset_main(argv: Sequence[str]) -> int:
     ap.add_argument("--out", required=True, help="output folder")
     _add_dataset_options(ap, rain_default="none")
     args = ap.parse_args(list(argv))
-    return _dataset(args, Path(args.folder), Path(args.out))
+    folder = Path(args.folder)
+    if not folder.exists():
+        raise InputError(folder, "dataset folder not found")
+    if not folder.is_dir():
+        raise InputError(folder, "not a folder (give the folder that holds the videos and labels.csv)")
+    return _dataset(args, folder, Path(args.out))
 
 
 def experiment_main(argv: Sequence[str]) -> int:

@@ -85,8 +85,32 @@ def trace_path(out: str | os.PathLike, condition: str, clip: str, model: str, ex
     return Path(out) / "traces" / condition / f"{clip}.{model}.{ext}"
 
 
-def load_meta(out: str | os.PathLike, condition: str, clip: str, model: str) -> dict | None:
-    """The finished record of (clip, model, condition), or None if not finished."""
+def fingerprint(path: str | os.PathLike, condition: str, model: str, seed: int, backend: str,
+                rain_params: dict | None) -> dict:
+    """What a saved result depends on: the input file (path, size, mtime), the model and
+    backend, the package version and, for rain, the seed and rain settings.
+
+    A finished result is reused on a rerun only when its fingerprint is the same, so
+    changing ``--seed``, the rain settings, the backend, the input or cdnf_ti itself
+    recomputes it.
+    """
+    from .. import __version__
+
+    st = os.stat(path)
+    fp: dict[str, Any] = {"source": str(path), "source_size": st.st_size, "source_mtime_ns": st.st_mtime_ns,
+                          "model": model, "backend": backend, "condition": condition, "version": __version__}
+    if condition == "rain":
+        fp.update(seed=seed, rain_params=rain_params or {})
+    return json.loads(json.dumps(fp))  # the form it takes after a JSON round trip
+
+
+def load_meta(out: str | os.PathLike, condition: str, clip: str, model: str,
+              expected: dict | None = None) -> dict | None:
+    """The finished record of (clip, model, condition), or None if not finished.
+
+    With ``expected`` (a :func:`fingerprint`), a record made with other options or
+    another input counts as not finished.
+    """
     jp = trace_path(out, condition, clip, model, "json")
     cp = trace_path(out, condition, clip, model, "csv")
     if not (jp.is_file() and cp.is_file()):
@@ -95,7 +119,11 @@ def load_meta(out: str | os.PathLike, condition: str, clip: str, model: str) -> 
         meta = json.loads(jp.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
-    return meta if isinstance(meta, dict) and meta.get("model") == model else None
+    if not isinstance(meta, dict) or meta.get("model") != model:
+        return None
+    if expected is not None and meta.get("fingerprint") != expected:
+        return None
+    return meta
 
 
 def _frames(task: ClipTask, src):
@@ -166,6 +194,7 @@ def run_clip_task(task: ClipTask) -> list[dict]:
             unconverged_frames=int((~trace.converged).sum()), seconds=round(wall, 3),
             source=str(task.path), seed=task.seed if rain is not None else None,
             rain_seed=rain_seed(task.seed, task.clip) if rain is not None else None, error="",
+            fingerprint=fingerprint(task.path, task.condition, name, task.seed, task.backend, task.rain_params),
         )
         trace.to_csv(trace_path(task.out, task.condition, task.clip, name))
         atomic_write_json(trace_path(task.out, task.condition, task.clip, name, "json"), meta)
@@ -314,7 +343,8 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
         for cond in conditions:
             todo = []
             for m in models:
-                meta = load_meta(out, cond, lab.clip, m)
+                meta = load_meta(out, cond, lab.clip, m,
+                                 fingerprint(files[lab.clip], cond, m, seed, backend, rain_params))
                 if meta is not None:
                     metas[(lab.clip, m, cond)] = meta
                     skipped += 1
