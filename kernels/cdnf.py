@@ -19,7 +19,7 @@ import taichi as ti
 
 from .common import (  # noqa: F401 - fill is part of this module's kernel set
     REFLECT, REPLICATE, block_span, border_index, border_weight, dog_column_sum, dog_row_pass, fill,
-    tanh_rational,
+    luminance_change, tanh_rational,
 )
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
@@ -31,9 +31,7 @@ VEC2 = ti.types.vector(2, ti.f32)
 def load_frame(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, scale: ti.f32, first: ti.i32):
     """``g = frame * scale``; ``P = g - L`` (0 when ``first``); ``L = g``."""
     for i, j in L:
-        g = ti.cast(frame[i, j], ti.f32) * scale
-        P[i, j] = ti.select(first != 0, 0.0, g - L[i, j])
-        L[i, j] = g
+        P[i, j] = luminance_change(frame, L, i, j, scale, first)
 
 
 @ti.kernel
@@ -300,6 +298,23 @@ def _balanced_len(n):
     return 2 * ti.max((n + 1) // 2, 512)
 
 
+@ti.func
+def _tile_row(kk, lst: ti.template(), cnt: ti.template(), nblk, bs, E1, H):
+    """Work item ``kk`` of a balanced loop over the active tiles' rows.
+
+    Returns ``(ok, t, i, blk, e0, e1)``: whether the item exists, its tile, its
+    row, the tile's column and its lane elements ``[e0, e1)`` (element 0 is the
+    left ghost).
+    """
+    k = _balanced(kk, cnt[None] * TILE_ROWS)
+    t = lst[ti.max(k, 0) // TILE_ROWS]
+    i = (t // nblk) * TILE_ROWS + ti.max(k, 0) % TILE_ROWS
+    blk = t % nblk
+    e0 = 1 + blk * bs
+    e1 = ti.min(e0 + bs, E1 + 1)
+    return (k >= 0) & (i < H), t, i, blk, e0, e1
+
+
 @ti.kernel
 def tiles_all(act: ti.template(), lst: ti.template(), cnt: ti.template()):
     """Mark every tile active."""
@@ -410,13 +425,8 @@ def lanes_contrast_iterate(
     r_on = 0.0
     r_off = 0.0
     for kk in range(_balanced_len(cnt[None] * TILE_ROWS)):
-        k = _balanced(kk, cnt[None] * TILE_ROWS)
-        t = lst[ti.max(k, 0) // TILE_ROWS]
-        blk = t % nblk
-        i = (t // nblk) * TILE_ROWS + ti.max(k, 0) % TILE_ROWS
-        if k >= 0 and i < H:
-            e0 = 1 + blk * bs
-            e1 = ti.min(e0 + bs, E1 + 1)
+        ok, t, i, blk, e0, e1 = _tile_row(kk, lst, cnt, nblk, bs, E1, H)
+        if ok:
             im = border_index(i - 1, H, mode)
             ip = border_index(i + 1, H, mode)
             wim = ti.f32(border_weight(i - 1, H, mode))
@@ -476,13 +486,8 @@ def lanes_summation_kernel(g1: tuple, g2: tuple):
         H = v.shape[0]
         E1 = (LANES + W - 1) // LANES
         for kk in range(_balanced_len(cnt[None] * TILE_ROWS)):
-            k = _balanced(kk, cnt[None] * TILE_ROWS)
-            t = lst[ti.max(k, 0) // TILE_ROWS]
-            blk = t % nblk
-            i = (t // nblk) * TILE_ROWS + ti.max(k, 0) % TILE_ROWS
-            if k >= 0 and i < H:
-                e0 = 1 + blk * bs
-                e1 = ti.min(e0 + bs, E1 + 1)
+            ok, t, i, blk, e0, e1 = _tile_row(kk, lst, cnt, nblk, bs, E1, H)
+            if ok:
                 a = v[i, e0 - 1]
                 c = v[i, e0]
                 for e in range(e0, e1):
@@ -499,13 +504,8 @@ def lanes_summation_kernel(g1: tuple, g2: tuple):
                     c = n
         res = 0.0
         for kk in range(_balanced_len(cnt[None] * TILE_ROWS)):
-            k = _balanced(kk, cnt[None] * TILE_ROWS)
-            t = lst[ti.max(k, 0) // TILE_ROWS]
-            blk = t % nblk
-            i = (t // nblk) * TILE_ROWS + ti.max(k, 0) % TILE_ROWS
-            if k >= 0 and i < H:
-                e0 = 1 + blk * bs
-                e1 = ti.min(e0 + bs, E1 + 1)
+            ok, t, i, blk, e0, e1 = _tile_row(kk, lst, cnt, nblk, bs, E1, H)
+            if ok:
                 m = ti.Vector([0.0] * LANES, dt=ti.f32)
                 for e in range(e0, e1):
                     b1 = ti.static(G1[R]) * row1[i, e]

@@ -56,6 +56,15 @@ def border_weight(i, n, mode: ti.template()):
 
 
 @ti.func
+def luminance_change(frame: ti.template(), L: ti.template(), i, j, scale, first):
+    """``P = frame * scale - L`` at (i, j) (0 on the first frame); stores the new ``L``."""
+    g = ti.cast(frame[i, j], ti.f32) * scale
+    p = ti.select(first != 0, 0.0, g - L[i, j])
+    L[i, j] = g
+    return p
+
+
+@ti.func
 def block_span(k, width, blocks):
     """Row and column range [j0, j1) of work item ``k`` (row-major items)."""
     i = k // blocks

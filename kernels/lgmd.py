@@ -12,7 +12,7 @@ The NumPy float64 oracle of every stage is :mod:`cdnf_ti.baselines_reference`.
 
 import taichi as ti
 
-from .common import block_span, fill  # noqa: F401 - fill is part of this module's kernel set
+from .common import block_span, fill, luminance_change  # noqa: F401 - fill is part of this module's kernel set
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 VEC2D = ti.types.vector(2, ti.f64)
@@ -120,10 +120,8 @@ def load_frame(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, scale: ti.f32, fir
         i, j0, j1 = block_span(k, W, blocks)
         acc = ti.f64(0.0)
         for j in range(j0, j1):
-            g = ti.cast(frame[i, j], ti.f32) * scale
-            p = ti.select(first != 0, 0.0, g - L[i, j])
+            p = luminance_change(frame, L, i, j, scale, first)
             P[i, j] = p
-            L[i, j] = g
             acc += ti.cast(ti.abs(p), ti.f64)
         ti.atomic_add(total, acc)
     return total

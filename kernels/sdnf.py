@@ -10,7 +10,7 @@ as separable row/column passes with a replicate border. NumPy float64 oracle:
 
 import taichi as ti
 
-from .common import REPLICATE, block_span, dog_column_sum, dog_row_pass, fill, tanh_rational  # noqa: F401
+from .common import REPLICATE, block_span, dog_column_sum, dog_row_pass, fill, luminance_change, tanh_rational  # noqa: F401
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
@@ -27,10 +27,8 @@ def load_binary(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, E: F2, scale: ti.
         i, j0, j1 = block_span(k, W, blocks)
         acc = ti.f64(0.0)
         for j in range(j0, j1):
-            g = ti.cast(frame[i, j], ti.f32) * scale
-            p = ti.select(first != 0, 0.0, g - L[i, j])
+            p = luminance_change(frame, L, i, j, scale, first)
             P[i, j] = p
-            L[i, j] = g
             e = ti.select(ti.abs(p) >= t_b, 1.0, 0.0)
             E[i, j] = e
             acc += ti.cast(e, ti.f64)

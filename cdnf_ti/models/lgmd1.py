@@ -19,14 +19,13 @@ authors' general LGMD code (``LGMDs.cs``). Differences from LGMD2
 """
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from .base import StepResult
-from .lgmd2 import LGMDFamily, TaichiLGMDBackend, _checks, lowpass_coefficient, sfa_step
+from .lgmd2 import LGMDFamily, TaichiLGMDBackend, _checks, lowpass_coefficient
 
 
 @dataclass(frozen=True)
@@ -148,12 +147,10 @@ class LGMD1(LGMDFamily):
         if held:
             # held at rest; the per-pixel layers are not computed (ON/OFF keep their values)
             k, kh, sum_g = 0.5, p.kh_floor, 0.0
+            self.k_prev, self.kh_prev = k, kh
         else:
             sum_g, extra, converged = self._run_layers()
-            k = 1.0 / (1.0 + math.exp(-sum_g / (n_cells * p.c_sig)))
-            a_s = p.tau_sfa / (p.tau_sfa + self.dt)
-            kh = sfa_step(self.kh_prev, self.k_prev, k, p.t_sfa, a_s, p.kh_floor)
-        self.k_prev, self.kh_prev = k, kh
+            k, kh = self._membrane(sum_g, n_cells)
         n, alert = self._spikes(kh)
         diag = dict(Kh=kh, n=n, count=self.count, FFI=self.pm, held=int(held), sum_G=sum_g, **extra)
         return StepResult(t, k, alert, converged, diag)

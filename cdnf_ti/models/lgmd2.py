@@ -245,6 +245,15 @@ class LGMDFamily(Model):
         self.count = 0 if n == 0 else self.count + n
         return n, self.count >= p.n_ts
 
+    def _membrane(self, sum_g: float, n_cells: int) -> tuple[float, float]:
+        """``K = sigmoid(sum G / (N c_sig))`` and its SFA-adapted ``Kh``; updates the history."""
+        p = self.params
+        k = 1.0 / (1.0 + math.exp(-sum_g / (n_cells * p.c_sig)))
+        a_s = p.tau_sfa / (p.tau_sfa + self.dt)
+        kh = sfa_step(self.kh_prev, self.k_prev, k, p.t_sfa, a_s, p.kh_floor)
+        self.k_prev, self.kh_prev = k, kh
+        return k, kh
+
     def fields(self) -> dict[str, np.ndarray]:
         """The model's inner layers, (H, W) each (empty before the first frame)."""
         if self._be is None:
@@ -301,10 +310,7 @@ class LGMD2(LGMDFamily):
         w_on = max(self.pm / p.t_pm, p.w_on_base)
         w_off = max(self.pm / p.t_pm, p.w_off_base)
         sum_g, max_ce = be.layers(w_on, w_off)
-        k = 1.0 / (1.0 + math.exp(-sum_g / (n_cells * p.c_sig)))
-        a_s = p.tau_sfa / (p.tau_sfa + self.dt)
-        kh = sfa_step(self.kh_prev, self.k_prev, k, p.t_sfa, a_s, p.kh_floor)
-        self.k_prev, self.kh_prev = k, kh
+        k, kh = self._membrane(sum_g, n_cells)
         n, alert = self._spikes(kh)
         diag = dict(Kh=kh, n=n, count=self.count, PM=self.pm, w_on=w_on, w_off=w_off,
                     sum_G=sum_g, max_Ce=max_ce)
