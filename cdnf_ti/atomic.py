@@ -1,11 +1,42 @@
-"""Atomic file writes: a result file is either complete or absent, never truncated."""
+"""Atomic file writes and output folders.
+
+A result file is either complete or absent, never truncated; a write error
+(read-only folder, full disk) is an :class:`~cdnf_ti.errors.OutputError` that
+names the path. :func:`prepare_output` checks an output folder before any work,
+and :func:`output_lock` keeps two runs from writing into one folder at once.
+"""
 from __future__ import annotations
 
+import contextlib
 import json
+import math
 import os
-import tempfile
+import secrets
+import sys
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
+
+from .errors import OutputError, output_error
+
+#: Name of the lock file a run holds in its output folder.
+LOCK_NAME = ".cdnf_ti.lock"
+
+
+def _new_temp(path: Path) -> str:
+    """Create an empty temporary file next to ``path`` and return its name.
+
+    ``os.open`` with mode 0o666 lets the process umask decide the permissions,
+    as for any ordinary file (the umask is never changed).
+    """
+    for _ in range(100):
+        tmp = path.parent / f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp{path.suffix}"
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        except FileExistsError:
+            continue
+        os.close(fd)
+        return str(tmp)
+    raise FileExistsError(f"cannot create a temporary file next to {path}")
 
 
 def atomic_write(path: str | os.PathLike, write: Callable[[str], None]) -> None:
@@ -13,25 +44,31 @@ def atomic_write(path: str | os.PathLike, write: Callable[[str], None]) -> None:
 
     The temporary file lives in the same folder (same file system), so the
     final ``os.replace`` is atomic.
+
+    Raises
+    ------
+    OutputError
+        The folder cannot be made or the file cannot be written (message names ``path``).
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + path.suffix, dir=path.parent)
-    os.close(fd)
+    tmp = None
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = _new_temp(path)
         write(tmp)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp creates 0600; results are ordinary files
         os.replace(tmp, path)
+    except OSError as e:
+        _discard(tmp)
+        raise output_error(path, e) from None
     except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+        _discard(tmp)
         raise
 
 
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+def _discard(tmp: str | None) -> None:
+    if tmp is not None:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
 
 
 def atomic_write_text(path: str | os.PathLike, text: str) -> None:
@@ -47,8 +84,28 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
 
 
 def atomic_write_json(path: str | os.PathLike, obj: Any) -> None:
-    """Write ``obj`` as indented JSON to ``path`` atomically."""
-    atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=False, default=_json_default) + "\n")
+    """Write ``obj`` as indented JSON to ``path`` atomically.
+
+    Non-finite floats (NaN, infinity) are written as ``null``: strict JSON has
+    no such numbers.
+    """
+    text = json.dumps(json_safe(obj), indent=2, sort_keys=False, default=_json_default, allow_nan=False)
+    atomic_write_text(path, text + "\n")
+
+
+def json_safe(o: Any) -> Any:
+    """``o`` with NumPy scalars/arrays and paths made plain and non-finite floats made ``None``."""
+    if isinstance(o, dict):
+        return {k: json_safe(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [json_safe(v) for v in o]
+    if isinstance(o, float):
+        return o if math.isfinite(o) else None
+    try:
+        plain = _json_default(o)
+    except TypeError:
+        return o
+    return json_safe(plain)
 
 
 def _json_default(o: Any) -> Any:
@@ -61,3 +118,84 @@ def _json_default(o: Any) -> Any:
     if isinstance(o, Path):
         return str(o)
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def prepare_output(folder: str | os.PathLike) -> Path:
+    """Create ``folder`` if needed and check that files can be written there, before any work.
+
+    Returns
+    -------
+    Path
+        The folder, resolved to an absolute path.
+
+    Raises
+    ------
+    OutputError
+        The folder cannot be created (a file is in the way, no permission) or
+        is not writable (read-only, full disk); the message names the folder.
+    """
+    p = Path(folder).expanduser()
+    if p.exists() and not p.is_dir():
+        raise OutputError(p, "exists and is not a folder (give a folder for the output)")
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise output_error(p, e) from None
+    probe = None
+    try:
+        probe = _new_temp(p / ".write-test")
+        with open(probe, "w") as f:
+            f.write("cdnf_ti write test\n")
+            f.flush()
+            os.fsync(f.fileno())
+    except OSError as e:
+        raise OutputError(p, f"output folder is not writable ({e.strerror or e})") from None
+    finally:
+        _discard(probe)
+    return p.resolve()
+
+
+@contextlib.contextmanager
+def output_lock(folder: str | os.PathLike, wait: bool = True,
+                notify: Callable[[str], None] | None = None) -> Iterator[None]:
+    """Hold an exclusive lock on ``folder`` (file ``folder/.cdnf_ti.lock``) for a run.
+
+    A second run into the same folder waits until the first one finishes
+    (``wait=True``; it then reuses the finished results) or fails at once with
+    an :class:`OutputError` (``wait=False``). The lock is released when the
+    process ends, however it ends. On systems without ``fcntl`` (Windows) it
+    does nothing.
+
+    Parameters
+    ----------
+    notify : callable, optional
+        Called with a one-line message when the run has to wait
+        (default: print to stderr).
+    """
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - Windows
+        yield
+        return
+    lock = Path(folder) / LOCK_NAME
+    try:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
+    except OSError as e:
+        raise output_error(lock, e) from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 64, 0).decode("ascii", "replace").strip() or "?"
+            msg = f"{folder}: another cdnf_ti run (pid {holder}) is writing to this folder"
+            if not wait:
+                raise OutputError(folder, f"another cdnf_ti run (pid {holder}) is writing to this folder; "
+                                          "wait for it or give another --out") from None
+            (notify or (lambda m: print(m, file=sys.stderr, flush=True)))(
+                f"note: {msg}; waiting for it to finish (its finished work will be reused)")
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        yield
+    finally:
+        os.close(fd)  # closing the descriptor releases the lock

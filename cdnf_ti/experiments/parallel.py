@@ -8,10 +8,19 @@ themselves (:func:`init_worker`).
 """
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import os
+import signal
+import sys
+import threading
+import time
+from collections import deque
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Callable, Iterator, Sequence
+
+from ..errors import UserError
 
 
 class TaskFailed(Exception):
@@ -53,7 +62,9 @@ def _one_line(e: BaseException) -> str:
 
 def map_tasks(fn: Callable[[Any], Any], tasks: Sequence[Any], *, workers: int | None = None,
               scheduler: str | Any | None = None, arch: str = "cpu",
-              progress: bool | str = False, connect_timeout: float = 20.0) -> Iterator[tuple[int, Any]]:
+              progress: bool | str = False, connect_timeout: float = 20.0,
+              describe: Callable[[Any, Any], str] | None = None,
+              retries: int = 1) -> Iterator[tuple[int, Any]]:
     """Run ``fn(task)`` for every task and yield ``(index, result)`` as each finishes.
 
     Parameters
@@ -71,65 +82,269 @@ def map_tasks(fn: Callable[[Any], Any], tasks: Sequence[Any], *, workers: int | 
     arch : str
         Taichi architecture the workers initialise.
     progress : bool or str
-        Show a tqdm bar over tasks (a string is its label).
+        Report progress on stderr (a string names the tasks). In a terminal: a
+        tqdm bar naming the latest task; elsewhere (logs, pipes): one line per
+        finished task and a final summary line. Failed tasks are reported in
+        both cases.
     connect_timeout : float
         Seconds to wait for the Dask scheduler.
+    describe : callable, optional
+        ``describe(task, result)`` -> one line naming the task and its outcome
+        (e.g. ``"clip3 [cdnf, rain]: 2.1 s"``); ``result`` is None for a task
+        about to start. Default: the task's index.
+    retries : int
+        Local processes only: how many times a task whose worker process died
+        (killed, out of memory, crashed) is run again, alone, in a fresh worker
+        before it is recorded as failed.
 
     Yields
     ------
     (int, object)
         The task's index in ``tasks`` and ``fn``'s result, or a
-        :class:`TaskFailed` instance if the task raised.
-    """
-    from tqdm import tqdm
+        :class:`TaskFailed` instance if the task raised or its worker died.
 
+    Notes
+    -----
+    Ctrl-C (SIGINT) stops the run: tasks not started are cancelled, running
+    local workers are stopped, finished results have already been yielded and
+    ``KeyboardInterrupt`` is raised within a second or two; a second Ctrl-C
+    during that clean-up ends the process at once (exit code 130). Local
+    workers ignore SIGINT themselves and die with their parent process.
+    """
     n = len(tasks)
-    bar = tqdm(total=n, desc=progress if isinstance(progress, str) else "clips", unit="task",
-               disable=None if progress else True)
+    rep = _Reporter(n, progress, describe, tasks)
     try:
         if n == 0:
             return
+        source_is_parallel = True
         if scheduler is not None:
-            yield from _dask(fn, tasks, scheduler, arch, bar, connect_timeout)
-            return
-        w = default_workers(n) if workers is None else max(0, int(workers))
-        if w <= 1:
-            init_worker(arch)
-            for i, t in enumerate(tasks):
-                try:
-                    res = fn(t)
-                except Exception as e:  # noqa: BLE001 - one failed task must not stop the run
-                    res = TaskFailed(_one_line(e))
-                bar.update(1)
+            source = _dask(fn, tasks, scheduler, arch, rep, connect_timeout)
+        else:
+            w = default_workers(n) if workers is None else max(0, int(workers))
+            if w <= 1:
+                source_is_parallel = False
+                source = _serial(fn, tasks, arch, rep)
+            else:
+                source = _local(fn, tasks, min(w, n), arch, rep, retries)
+        with _interruptible() if source_is_parallel else contextlib.nullcontext():
+            for i, res in source:
+                rep.finished(i, res)
                 yield i, res
-            return
-        yield from _local(fn, tasks, min(w, n), arch, bar)
+        rep.summary()
     finally:
-        bar.close()
+        rep.close()
 
 
-def _local(fn, tasks, workers, arch, bar) -> Iterator[tuple[int, Any]]:
+class _Reporter:
+    """Progress and failures, the same in a terminal (tqdm bar) and in a log (one line per task)."""
+
+    def __init__(self, n: int, progress: bool | str, describe, tasks) -> None:
+        self.n, self.done, self.failed = n, 0, 0
+        self.tasks, self.describe = tasks, describe
+        self.enabled = bool(progress)
+        self.label = progress if isinstance(progress, str) else "tasks"
+        self.t0 = time.perf_counter()
+        self.tty = self.enabled and _isatty(sys.stderr)
+        self.bar = None
+        if self.tty and n:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=n, desc=self.label, unit="task", file=sys.stderr)
+
+    def _text(self, i: int, res: Any) -> str:
+        if self.describe is not None:
+            try:
+                return self.describe(self.tasks[i], res)
+            except Exception:  # noqa: BLE001 - a report must not break the run
+                pass
+        return f"task {i + 1}"
+
+    def starting(self, i: int) -> None:
+        if self.bar is not None:
+            self.bar.set_postfix_str(self._text(i, None), refresh=True)
+
+    def finished(self, i: int, res: Any) -> None:
+        self.done += 1
+        failed = isinstance(res, TaskFailed)
+        self.failed += failed
+        if not self.enabled:
+            return
+        line = f"[{self.done}/{self.n}] {self._text(i, res)}"
+        if failed and self.describe is None:
+            line += f": error: {res}"
+        if self.bar is not None:
+            if failed:
+                self.bar.write(line, file=sys.stderr)
+            self.bar.set_postfix_str(self._text(i, res)[:60], refresh=False)
+            self.bar.update(1)
+        else:
+            print(line, file=sys.stderr, flush=True)
+
+    def summary(self) -> None:
+        if self.enabled and self.n:
+            line = (f"{self.label}: {self.done} of {self.n} tasks finished, {self.failed} failed, "
+                    f"{time.perf_counter() - self.t0:.1f} s")
+            if self.bar is not None:
+                self.bar.close()
+                self.bar = None
+            print(line, file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+def _isatty(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
+def _serial(fn, tasks, arch, rep) -> Iterator[tuple[int, Any]]:
+    init_worker(arch)
+    for i, t in enumerate(tasks):
+        rep.starting(i)
+        try:
+            res = fn(t)
+        except Exception as e:  # noqa: BLE001 - one failed task must not stop the run
+            res = TaskFailed(_one_line(e))
+        yield i, res
+
+
+def _init_local_worker(arch: str, threads: int, parent_pid: int) -> None:
+    """Initializer of a local worker process: ignore Ctrl-C (the parent handles it), die with the
+    parent, initialise Taichi."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with_parent(parent_pid)
+    init_worker(arch, threads)
+
+
+def die_with_parent(parent_pid: int, poll_s: float = 1.0) -> None:
+    """Make this process end when process ``parent_pid`` ends, however it ends (even ``kill -9``).
+
+    On Linux the kernel sends SIGKILL (``prctl(PR_SET_PDEATHSIG)``); everywhere a
+    daemon thread also polls the parent pid every ``poll_s`` seconds.
+    """
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+        except (OSError, AttributeError):  # pragma: no cover - no libc prctl
+            pass
+    if os.getppid() != parent_pid:  # the parent died before we got here
+        os._exit(1)
+
+    def watch() -> None:
+        while True:
+            time.sleep(poll_s)
+            if os.getppid() != parent_pid:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="cdnf_ti-parent-watchdog", daemon=True).start()
+
+
+def _exit_now(signum, frame) -> None:  # noqa: ARG001 - signal handler signature
+    """Second Ctrl-C during clean-up: end the process at once."""
+    try:
+        sys.stderr.write("interrupted again: exiting now\n")
+        sys.stderr.flush()
+    finally:
+        os._exit(130)
+
+
+def _first_interrupt(signum, frame) -> None:  # noqa: ARG001 - signal handler signature
+    """First Ctrl-C: arm :func:`_exit_now` for a second one, then stop the run (KeyboardInterrupt)."""
+    signal.signal(signal.SIGINT, _exit_now)
+    raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def _interruptible() -> Iterator[None]:
+    """While running parallel tasks: Ctrl-C raises KeyboardInterrupt once; a second Ctrl-C during the
+    clean-up that follows ends the process at once (exit code 130). Only in the main thread, and only
+    when Python's default Ctrl-C handling is in place (a host program's own handler is left alone)."""
+    main = threading.current_thread() is threading.main_thread()
+    old = signal.getsignal(signal.SIGINT) if main else None
+    if old is not signal.default_int_handler:
+        yield
+        return
+    signal.signal(signal.SIGINT, _first_interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+def _stop_pool(ex: ProcessPoolExecutor | None) -> None:
+    """Cancel queued tasks and stop the workers now (no waiting for running tasks)."""
+    if ex is None:
+        return
+    procs = list((getattr(ex, "_processes", None) or {}).values())
+    ex.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        with contextlib.suppress(Exception):
+            p.kill()
+    for p in procs:
+        with contextlib.suppress(Exception):
+            p.join(timeout=2)
+
+
+def _local(fn, tasks, workers, arch, rep, retries=1) -> Iterator[tuple[int, Any]]:
+    """Local worker processes; at most ``workers`` tasks in flight, so that little is left to
+    cancel on Ctrl-C and the task that killed a worker can be told apart and retried."""
     ctx = mp.get_context("spawn")
     threads = taichi_threads_per_worker(workers)
-    ex = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=init_worker,
-                             initargs=(arch, threads))
+    todo: deque[int] = deque(range(len(tasks)))
+    retry: deque[int] = deque()  # suspects of a worker death: re-run one at a time
+    deaths = [0] * len(tasks)
+    ex: ProcessPoolExecutor | None = None
+    inflight: dict = {}
     try:
-        pending = {ex.submit(fn, t): i for i, t in enumerate(tasks)}
-        while pending:
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for fut in sorted(done, key=lambda f: pending[f]):
-                i = pending.pop(fut)
-                try:
-                    res = fut.result()
-                except Exception as e:  # noqa: BLE001 - a crashed worker becomes an error row
-                    res = TaskFailed(_one_line(e))
-                bar.update(1)
-                yield i, res
+        while todo or retry or inflight:
+            if ex is None:
+                ex = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_local_worker,
+                                         initargs=(arch, threads, os.getpid()))
+            if retry:
+                if not inflight:
+                    i = retry.popleft()
+                    rep.starting(i)
+                    inflight[ex.submit(fn, tasks[i])] = i
+            else:
+                while todo and len(inflight) < workers:
+                    i = todo.popleft()
+                    rep.starting(i)
+                    inflight[ex.submit(fn, tasks[i])] = i
+            done, _ = wait(inflight, return_when=FIRST_COMPLETED)
+            if any(isinstance(f.exception(), BrokenProcessPool) for f in done):
+                # a worker died: every task in flight fails with it; collect them all
+                done, _ = wait(inflight, timeout=30)
+                done = set(done) | set(inflight)
+                _stop_pool(ex)
+                ex = None
+            for fut in sorted(done, key=lambda f: inflight[f]):
+                i = inflight.pop(fut)
+                exc = fut.exception() if fut.done() else BrokenProcessPool("worker did not answer")
+                if exc is None:
+                    yield i, fut.result()
+                elif isinstance(exc, BrokenProcessPool):
+                    deaths[i] += 1
+                    if deaths[i] <= retries:
+                        retry.append(i)
+                    else:
+                        yield i, TaskFailed(f"its worker process died (killed, out of memory or crashed) "
+                                            f"{deaths[i]} times")
+                else:
+                    yield i, TaskFailed(_one_line(exc))
     except BaseException:
-        ex.shutdown(wait=False, cancel_futures=True)
+        _stop_pool(ex)
         raise
     else:
-        ex.shutdown(wait=True)
+        if ex is not None:
+            ex.shutdown(wait=True)
 
 
 def _dask_task(fn, task, arch):
@@ -137,16 +352,16 @@ def _dask_task(fn, task, arch):
     return fn(task)
 
 
-def _dask(fn, tasks, scheduler, arch, bar, connect_timeout=20.0) -> Iterator[tuple[int, Any]]:
+def _dask(fn, tasks, scheduler, arch, rep, connect_timeout=20.0) -> Iterator[tuple[int, Any]]:
     try:
         from distributed import Client, as_completed
     except ImportError as e:  # pragma: no cover - dask[distributed] is a dependency
-        raise ValueError("--scheduler needs dask.distributed (pip install 'dask[distributed]')") from e
+        raise UserError("--scheduler needs dask.distributed (pip install 'dask[distributed]')") from e
     own = not isinstance(scheduler, Client)
     try:
         client = Client(scheduler, timeout=f"{connect_timeout}s") if own else scheduler
     except OSError as e:
-        raise ValueError(f"cannot connect to the Dask scheduler at {scheduler}: {_one_line(e)}") from None
+        raise UserError(f"cannot connect to the Dask scheduler at {scheduler}: {_one_line(e)}") from None
     futures: dict = {}
     try:
         futures = {client.submit(_dask_task, fn, t, arch, pure=False): i for i, t in enumerate(tasks)}
@@ -156,12 +371,10 @@ def _dask(fn, tasks, scheduler, arch, bar, connect_timeout=20.0) -> Iterator[tup
                 res = fut.result()
             except Exception as e:  # noqa: BLE001
                 res = TaskFailed(_one_line(e))
-            bar.update(1)
             yield i, res
     except BaseException:
-        if own:
-            for f in futures:
-                f.cancel()
+        for f in futures:
+            f.cancel()
         raise
     finally:
         if own:
