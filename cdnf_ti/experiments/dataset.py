@@ -25,9 +25,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from ..atomic import atomic_write_json
-from ..errors import InputError
-from .labels import ClipLabel, read_labels, validate_dataset
+from ..atomic import atomic_write_json, output_lock, prepare_output
+from ..errors import InputError, UserError
+from .labels import ClipLabel, read_labels, unlabelled_videos, validate_dataset
 from .scoring import Padding, score_clip
 
 CONDITIONS = ("clean", "rain")
@@ -144,7 +144,11 @@ def _frames(task: ClipTask, src):
 
 
 def run_clip_task(task: ClipTask) -> list[dict]:
-    """Run the task's models on its clip; save each trace and its record.
+    """Run the task's models on its clip in one pass; save each trace and its record.
+
+    The clip is decoded (and, for the rain condition, rained on) once for all
+    the task's models (:func:`~cdnf_ti.models.base.run_models`). Models are
+    isolated: one model that fails gives an error record for that model only.
 
     Returns
     -------
@@ -152,54 +156,83 @@ def run_clip_task(task: ClipTask) -> list[dict]:
         One record per model: ``clip, model, condition, frames, fps,
         first_alert, max_output, output_name, threshold, snr_db,
         unconverged_frames, seconds, error`` (``error`` empty on success). A
-        clip that cannot be opened or decoded gives records with ``error`` set;
-        nothing is saved for them, so a rerun tries again.
+        clip that cannot be opened or decoded gives records with ``error`` set
+        for every model; nothing is saved for them, so a rerun tries again.
     """
     from ..frames import open_source
     from ..models import create_model
+    from ..models.base import NotConvergedWarning, run_models
     from .parallel import init_worker
 
     if task.backend == "taichi":
         init_worker(task.arch)
-    records: list[dict] = []
     base = {"clip": task.clip, "condition": task.condition}
+
+    def failed(names, e: BaseException) -> list[dict]:
+        msg = str(e) if isinstance(e, InputError) else f"{task.path}: {type(e).__name__}: {e}"
+        return [dict(base, model=m, error=msg.splitlines()[0] if msg else type(e).__name__) for m in names]
+
     try:
         src = open_source(task.path)
     except InputError as e:
-        return [dict(base, model=m, error=str(e)) for m in task.models]
-    for i, name in enumerate(task.models):
+        return failed(task.models, e)
+    records: dict[str, dict] = {}
+    names, instances = [], []
+    for name in task.models:
         try:
-            model = create_model(name, backend=task.backend, arch=task.arch, fps=src.fps)
+            instances.append(create_model(name, backend=task.backend, arch=task.arch, fps=src.fps))
+            names.append(name)
+        except Exception as e:  # noqa: BLE001 - one model's failure is that model's error row
+            records.update((r["model"], r) for r in failed([name], e))
+    if instances:
+        errors: list = []
+        rain = None
+        try:
             frames, rain = _frames(task, src)
-            t0 = time.perf_counter()
             with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                trace = model.run(frames, progress=False)
-            wall = time.perf_counter() - t0
-        except (InputError, ValueError, RuntimeError, OSError) as e:
-            msg = str(e) if isinstance(e, InputError) else f"{task.path}: {e}".splitlines()[0]
-            records.append(dict(base, model=name, error=msg))
-            if isinstance(e, InputError):  # the clip itself is bad: every model would fail the same way
-                records.extend(dict(base, model=m, error=msg) for m in task.models[i + 1:])
-                break
-            continue
+                warnings.simplefilter("ignore", NotConvergedWarning)  # recorded as unconverged_frames
+                traces = run_models(instances, frames, progress=False, errors=errors)
+        except (InputError, OSError, RuntimeError, ValueError) as e:  # the clip (or its rain) is bad
+            traces, errors = [None] * len(names), [e] * len(names)
         snr = None
-        if rain is not None:
+        if rain is not None and errors.count(None):
             s = getattr(rain, "snr_db", None)
             snr = None if s is None or not math.isfinite(float(s)) else float(s)
-        meta = dict(
-            base, model=name, frames=trace.n_frames, fps=float(src.fps), first_alert=trace.first_alert,
-            max_output=float(trace.output.max()) if trace.n_frames else None,
-            output_name=trace.output_name, threshold=trace.threshold, snr_db=snr,
-            unconverged_frames=int((~trace.converged).sum()), seconds=round(wall, 3),
-            source=str(task.path), seed=task.seed if rain is not None else None,
-            rain_seed=rain_seed(task.seed, task.clip) if rain is not None else None, error="",
-            fingerprint=fingerprint(task.path, task.condition, name, task.seed, task.backend, task.rain_params),
-        )
-        trace.to_csv(trace_path(task.out, task.condition, task.clip, name))
-        atomic_write_json(trace_path(task.out, task.condition, task.clip, name, "json"), meta)
-        records.append(meta)
-    return records
+        for name, trace, err in zip(names, traces, errors):
+            if err is not None or trace is None:
+                records.update((r["model"], r) for r in failed([name], err or RuntimeError("no trace")))
+                continue
+            meta = dict(
+                base, model=name, frames=trace.n_frames, fps=float(src.fps), first_alert=trace.first_alert,
+                max_output=float(trace.output.max()) if trace.n_frames else None,
+                output_name=trace.output_name, threshold=trace.threshold, snr_db=snr,
+                unconverged_frames=int((~trace.converged).sum()), seconds=round(float(trace.seconds), 3),
+                source=str(task.path), seed=task.seed if rain is not None else None,
+                rain_seed=rain_seed(task.seed, task.clip) if rain is not None else None, error="",
+                fingerprint=fingerprint(task.path, task.condition, name, task.seed, task.backend,
+                                        task.rain_params),
+            )
+            trace.to_csv(trace_path(task.out, task.condition, task.clip, name))
+            atomic_write_json(trace_path(task.out, task.condition, task.clip, name, "json"), meta)
+            records[name] = meta
+    return [records[m] for m in task.models]
+
+
+def describe_task(task: ClipTask, records: Any) -> str:
+    """One progress line for a finished task: ``clip [models, condition]: seconds`` or its error."""
+    head = f"{task.clip} [{', '.join(task.models)}, {task.condition}]"
+    if records is None:
+        return head
+    from .parallel import TaskFailed
+
+    if isinstance(records, TaskFailed):
+        return f"{head}: error: {records}"
+    errs = [r for r in records if r.get("error")]
+    secs = sum(float(r.get("seconds") or 0) for r in records if not r.get("error"))
+    line = f"{head}: {secs:.1f} s"
+    if errs:
+        line += "; " + "; ".join(f"error [{r['model']}]: {r['error']}" for r in errs)
+    return line
 
 
 @dataclass
@@ -233,6 +266,8 @@ class DatasetRun:
     skipped: int = 0
     sweep: list[dict] = field(default_factory=list)
     summary: dict = field(default_factory=dict)
+    #: Videos in the dataset folder that have no row in the labels file (not run).
+    unlabelled: list[str] = field(default_factory=list)
 
     @property
     def n_errors(self) -> int:
@@ -312,13 +347,15 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
     ------
     InputError
         Bad labels file (before any work starts).
-    ValueError
+    UserError
         Bad option.
+    OutputError
+        ``out`` cannot be created or written (before any work starts).
     """
     from .reports import write_reports
 
     if rain not in RAIN_CHOICES:
-        raise ValueError(f"--rain must be one of {', '.join(RAIN_CHOICES)}, got {rain!r}")
+        raise UserError(f"--rain must be one of {', '.join(RAIN_CHOICES)}, got {rain!r}")
     folder = Path(folder)
     labels_path = Path(labels_path) if labels_path is not None else folder / "labels.csv"
     labels = read_labels(labels_path)
@@ -326,15 +363,23 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
     conditions = list(RAIN_CHOICES[rain])
     models = list(dict.fromkeys(models))
     if not models:
-        raise ValueError("no model named")
+        raise UserError("no model named")
     if "rain" in conditions:
         try:
             from ..stimuli import rain as _rain  # noqa: F401
         except ImportError:
-            raise ValueError("synthetic rain is not available in this installation "
+            raise UserError("synthetic rain is not available in this installation "
                              "(cdnf_ti.stimuli.rain missing); use --rain none") from None
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = prepare_output(out)  # before any work: a folder that cannot be written fails now
+    files = {clip: Path(f).resolve() for clip, f in files.items()}  # workers may run elsewhere
+    with output_lock(out):
+        return _run_locked(folder, labels_path, labels, files, out, models, conditions, padding, seed, workers,
+                           scheduler, backend, arch, progress, figures, rain_params, on_record)
+
+
+def _run_locked(folder, labels_path, labels, files, out, models, conditions, padding, seed, workers, scheduler,
+                backend, arch, progress, figures, rain_params, on_record) -> DatasetRun:
+    from .reports import write_reports
 
     metas: dict[tuple[str, str, str], dict] = {}
     tasks: list[ClipTask] = []
@@ -357,7 +402,7 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
 
     ran = 0
     for i, res in map_tasks(run_clip_task, tasks, workers=workers, scheduler=scheduler, arch=arch,
-                            progress="clips" if progress else False):
+                            progress="clips" if progress else False, describe=describe_task):
         t = tasks[i]
         recs = ([dict(clip=t.clip, model=m, condition=t.condition, error=f"{t.path}: {res}") for m in t.models]
                 if isinstance(res, TaskFailed) else res)
@@ -368,7 +413,8 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
                 on_record(r)
     rows = [build_row(lab, m, c, metas.get((lab.clip, m, c)), padding)
             for lab in labels for c in conditions for m in models]
-    result = DatasetRun(rows, labels, models, conditions, padding, out, ran, skipped)
+    result = DatasetRun(rows, labels, models, conditions, padding, out, ran, skipped,
+                        unlabelled=unlabelled_videos(folder, labels))
     write_reports(result, dataset=str(folder), labels_path=str(labels_path), seed=seed, figures=figures,
                   progress=progress)
     return result

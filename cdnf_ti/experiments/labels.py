@@ -228,3 +228,22 @@ def validate_dataset(labels: Iterable[ClipLabel], folder: str | os.PathLike,
                 raise InputError(lp, f"row {lab.row} ({lab.clip}): {name} {val} is outside the video "
                                      f"(frames 0..{n - 1})")
     return files
+
+
+def unlabelled_videos(folder: str | os.PathLike, labels: Iterable[ClipLabel]) -> list[str]:
+    """File names of the videos (and ``.npy`` arrays) in ``folder`` that no labels row names.
+
+    Such videos are not run; the command line prints a note listing them.
+    """
+    folder = Path(folder)
+    named = set()
+    for lab in labels:
+        f = find_clip(folder, lab.clip)
+        if f is not None:
+            named.add(f.name)
+    try:
+        entries = sorted(folder.iterdir())
+    except OSError:
+        return []
+    return [p.name for p in entries
+            if p.is_file() and p.suffix.lower() in VIDEO_EXTENSIONS and p.name not in named]

@@ -207,7 +207,7 @@ class Model(ABC):
 
 
 def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bool | str = False,
-               total: int | None = None) -> list[Trace]:
+               total: int | None = None, errors: "list[BaseException | None] | None" = None) -> list[Trace]:
     """Reset several models and step them all through one pass over ``frames``.
 
     Each frame is decoded (and e.g. rain is generated) once and handed to every
@@ -222,14 +222,26 @@ def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bo
         Show a tqdm progress bar (a string is used as its label).
     total : int, optional
         Number of frames, for the progress bar.
+    errors : list, optional
+        Isolate the models from each other: an exception raised by one model's
+        ``reset``/``step`` is stored at its index in this list (filled with None
+        first), that model stops and its trace is None; the others go on. An
+        error of the frame stream itself (a corrupt file) still raises.
 
     Returns
     -------
     list of Trace
-        One per model, in order.
+        One per model, in order (None for a model that failed, with ``errors``).
     """
-    for m in models:
-        m.reset()
+    if errors is not None:
+        errors[:] = [None] * len(models)
+    for k, m in enumerate(models):
+        try:
+            m.reset()
+        except Exception as e:
+            if errors is None:
+                raise
+            errors[k] = e
     steps: list[list[StepResult]] = [[] for _ in models]
     seconds = [0.0] * len(models)
     bar = None
@@ -241,8 +253,16 @@ def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bo
     try:
         for frame in frames:
             for k, m in enumerate(models):
+                if errors is not None and errors[k] is not None:
+                    continue
                 t0 = time.perf_counter()
-                steps[k].append(m.step(frame))
+                try:
+                    steps[k].append(m.step(frame))
+                except Exception as e:
+                    if errors is None:
+                        raise
+                    errors[k] = e
+                    continue
                 if len(steps[k]) > 1:  # the first step allocates state and compiles kernels
                     seconds[k] += time.perf_counter() - t0
             if bar is not None:
@@ -252,6 +272,9 @@ def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bo
             bar.close()
     traces = []
     for k, m in enumerate(models):
+        if errors is not None and errors[k] is not None:
+            traces.append(None)
+            continue
         trace = Trace.from_steps(m, steps[k], seconds[k])
         n_bad = int((~trace.converged).sum())
         if n_bad:
