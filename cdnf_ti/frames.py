@@ -114,9 +114,28 @@ def _checked(path: str, frames: Iterator[np.ndarray], shape: tuple[int, int]) ->
         yield f
 
 
-def open_video(path: str | os.PathLike) -> FrameSource:
-    """Open an OpenCV-readable video file (BGR uint8 frames)."""
+#: Frame rate assumed for inputs that carry none (image folders, .npy arrays), frames/s.
+DEFAULT_FPS = 30.0
+COLOR_ORDERS = ("bgr", "rgb")
+
+
+def _fps_arg(path: str, fps: float | None) -> float | None:
+    if fps is None:
+        return None
+    fps = float(fps)
+    if not (np.isfinite(fps) and fps > 0):
+        raise InputError(path, f"frame rate must be a finite number > 0, got {fps:g}")
+    return fps
+
+
+def open_video(path: str | os.PathLike, fps: float | None = None) -> FrameSource:
+    """Open an OpenCV-readable video file (BGR uint8 frames).
+
+    ``fps`` overrides the frame rate the container states (used when it is 0,
+    absurd or missing: 30).
+    """
     path = str(path)
+    override = _fps_arg(path, fps)
     cap = cv2.VideoCapture(path)
     if not cap.isOpened():
         cap.release()
@@ -128,7 +147,9 @@ def open_video(path: str | os.PathLike) -> FrameSource:
     if not ok or first is None:
         raise InputError(path, "contains no decodable frames (empty or corrupt video)")
     if not (0 < fps < 1000):
-        fps = 30.0
+        fps = DEFAULT_FPS
+    if override is not None:
+        fps = override
     shape = first.shape[:2]
 
     def gen() -> Iterator[np.ndarray]:
@@ -155,9 +176,14 @@ def open_video(path: str | os.PathLike) -> FrameSource:
                        lambda: _checked(path, gen(), shape), background_decode=True)
 
 
-def open_image_folder(path: str | os.PathLike) -> FrameSource:
-    """Open a folder of images as frames, in sorted file-name order."""
+def open_image_folder(path: str | os.PathLike, fps: float | None = None) -> FrameSource:
+    """Open a folder of images as frames, in sorted file-name order.
+
+    Images are decoded by OpenCV (colour comes out BGR, as :func:`to_grey` expects).
+    A folder carries no frame rate: ``fps`` (default :data:`DEFAULT_FPS`).
+    """
     path = str(path)
+    fps = _fps_arg(path, fps) or DEFAULT_FPS
     files = sorted(p for p in Path(path).iterdir() if p.suffix.lower() in IMAGE_EXTENSIONS)
     if not files:
         raise InputError(path, f"folder holds no image files ({', '.join(IMAGE_EXTENSIONS)})")
@@ -178,12 +204,25 @@ def open_image_folder(path: str | os.PathLike) -> FrameSource:
                                      f"{shape[1]}x{shape[0]} (frame size changed mid-sequence)")
             yield img
 
-    return FrameSource(path, 30.0, len(files), shape, gen, background_decode=True)
+    return FrameSource(path, fps, len(files), shape, gen, background_decode=True)
 
 
-def open_npy(path: str | os.PathLike) -> FrameSource:
-    """Open a ``.npy`` array of frames: (T, H, W) or (T, H, W, 3), uint8 or float in [0, 1]."""
+def open_npy(path: str | os.PathLike, fps: float | None = None, color_order: str = "bgr") -> FrameSource:
+    """Open a ``.npy`` array of frames: (T, H, W) or (T, H, W, 3), uint8 or float in [0, 1].
+
+    Parameters
+    ----------
+    fps : float, optional
+        Frame rate (an array carries none; default :data:`DEFAULT_FPS`).
+    color_order : {"bgr", "rgb"}
+        Channel order of (T, H, W, 3) arrays. ``bgr`` (default) is OpenCV's;
+        arrays made with imageio, PIL or matplotlib are ``rgb``. Grey is
+        computed with the BT.601 weights, so the order matters.
+    """
     path = str(path)
+    fps = _fps_arg(path, fps) or DEFAULT_FPS
+    if color_order not in COLOR_ORDERS:
+        raise InputError(path, f"unknown colour order {color_order!r}; choose bgr or rgb")
     try:
         arr = np.load(path, mmap_mode="r", allow_pickle=False)
     except Exception as e:  # noqa: BLE001 - any failure here is a bad file
@@ -194,15 +233,27 @@ def open_npy(path: str | os.PathLike) -> FrameSource:
         raise InputError(path, "array holds no frames")
     shape = tuple(arr.shape[1:3])
 
+    flip = color_order == "rgb" and arr.ndim == 4 and arr.shape[3] == 3
+
     def gen() -> Iterator[np.ndarray]:
         for t in range(arr.shape[0]):
-            yield np.asarray(arr[t])
+            f = np.asarray(arr[t])
+            yield np.ascontiguousarray(f[:, :, ::-1]) if flip else f
 
-    return FrameSource(path, 30.0, int(arr.shape[0]), shape, gen, background_decode=True)
+    return FrameSource(path, fps, int(arr.shape[0]), shape, gen, background_decode=True)
 
 
-def open_source(path: str | os.PathLike) -> FrameSource:
+def open_source(path: str | os.PathLike, fps: float | None = None, color_order: str = "bgr") -> FrameSource:
     """Open any supported input: video file, image folder or ``.npy`` array.
+
+    Parameters
+    ----------
+    fps : float, optional
+        Frame rate in frames/s: overrides a video's own; image folders and
+        ``.npy`` arrays carry none and default to :data:`DEFAULT_FPS` (30).
+    color_order : {"bgr", "rgb"}
+        Channel order of colour ``.npy`` arrays (see :func:`open_npy`); files
+        decoded by OpenCV are always BGR.
 
     Raises
     ------
@@ -213,16 +264,16 @@ def open_source(path: str | os.PathLike) -> FrameSource:
     if not p.exists():
         raise InputError(path, "no such file or folder")
     if p.is_dir():
-        return open_image_folder(p)
+        return open_image_folder(p, fps)
     if not os.access(p, os.R_OK):
         raise InputError(path, "permission denied")
     if p.stat().st_size == 0:
         raise InputError(path, "file is empty")
     if p.suffix.lower() == ".npy":
-        return open_npy(p)
+        return open_npy(p, fps, color_order)
     if p.suffix.lower() in IMAGE_EXTENSIONS:
         raise InputError(path, "is a single image; give a video, a folder of images or a .npy array")
-    return open_video(p)
+    return open_video(p, fps)
 
 
 def _grey_frames(source: FrameSource) -> Iterator[np.ndarray]:

@@ -108,8 +108,24 @@ def stimulus_label(name: str, params: dict[str, Any]) -> str:
     return "_".join(parts)
 
 
-def resolve_input(spec: str | os.PathLike) -> FrameSource:
+def check_stim_size(spec: str, params: dict[str, Any]) -> None:
+    """Reject a stimulus whose frames could not be held here, before it is built (:mod:`cdnf_ti.limits`)."""
+    from .errors import UserError
+    from .limits import check_frame_size
+
+    size = params.get("size", 600)
+    h, w = params.get("height", size), params.get("width", size)
+    try:
+        check_frame_size(h, w, what="frame size")
+    except UserError as e:
+        raise InputError(spec, str(e)) from None
+
+
+def resolve_input(spec: str | os.PathLike, fps: float | None = None, color_order: str = "bgr") -> FrameSource:
     """Open ``spec``: ``stim:...`` generates a stimulus, anything else goes to :func:`~cdnf_ti.frames.open_source`.
+
+    ``fps`` and ``color_order`` are passed to :func:`~cdnf_ti.frames.open_source`
+    (a generated stimulus takes its frame rate from its ``fps`` parameter).
 
     Returns
     -------
@@ -120,12 +136,14 @@ def resolve_input(spec: str | os.PathLike) -> FrameSource:
     Raises
     ------
     InputError
-        Bad path or bad stimulus spec (one-line message naming the input).
+        Bad path or bad stimulus spec, or a stimulus too large for this
+        machine (:mod:`cdnf_ti.limits`); one-line message naming the input.
     """
     s = str(spec)
     if not s.startswith(STIM_PREFIX):
-        return open_source(spec)
+        return open_source(spec, fps=fps, color_order=color_order)
     name, params = parse_stim_spec(s)
+    check_stim_size(s, params)
     try:
         stim = make_stimulus(name, params)
     except (ValueError, TypeError) as e:

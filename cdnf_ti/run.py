@@ -6,8 +6,15 @@ Usage::
     python -m cdnf_ti.run VIDEO [VIDEO ...] --out DIR    # per-frame traces + one summary line per video
     python -m cdnf_ti.run SUBCOMMAND ...                 # see SUBCOMMANDS below
 
-User errors (bad files, bad options) print one line, ``error: <file>: <problem>``,
-with no traceback, and exit with code 2.
+Errors: a user error (bad file, bad option, unavailable device, output folder
+that cannot be written: :class:`~cdnf_ti.errors.UserError`) prints one line,
+``error: <file>: <problem>``, with no traceback. Any other exception is a bug
+and shows its traceback.
+
+Exit codes (every command): 0 all done; 1 the run finished and wrote its
+results, but some input (clip, model) failed (its ``error:`` line is printed and
+it is recorded in the summary); 2 a user error stopped the run before any
+result (for ``run``: also when every input failed); 130 interrupted (Ctrl-C).
 """
 from __future__ import annotations
 
@@ -15,13 +22,13 @@ import argparse
 import csv
 import importlib
 import io
+import math
 import sys
 import warnings
 from pathlib import Path
 from typing import Callable, Sequence
 
-from .errors import InputError
-from .taichi_runtime import BackendUnavailableError
+from .errors import InputError, UserError
 
 #: Subcommands: first word on the command line -> "module:function(argv) -> int".
 SUBCOMMANDS: dict[str, str] = {
@@ -33,7 +40,7 @@ SUBCOMMANDS: dict[str, str] = {
     "experiment": "cdnf_ti.experiments.cli:experiment_main",
 }
 
-EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 
 def add_model_options(ap: argparse.ArgumentParser, default_models: str = "cdnf") -> None:
@@ -44,6 +51,54 @@ def add_model_options(ap: argparse.ArgumentParser, default_models: str = "cdnf")
                     help="taichi kernels (default) or the NumPy float64 reference")
     ap.add_argument("--arch", default="cpu", choices=("cpu", "cuda", "vulkan", "gpu"),
                     help="Taichi architecture (default: cpu)")
+
+
+def check_model_options(args: argparse.Namespace) -> None:
+    """Check the options of :func:`add_model_options` before any work: the Taichi arch must exist here.
+
+    Raises
+    ------
+    BackendUnavailableError
+        ``--arch`` names a GPU backend this machine does not have (one line, exit 2).
+    """
+    from .taichi_runtime import check_arch
+
+    if getattr(args, "backend", "taichi") == "taichi":
+        check_arch(getattr(args, "arch", "cpu"))
+
+
+def finite_float(text: str) -> float:
+    """argparse type: a finite number (rejects inf and nan)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    value = finite_float(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
+    return value
+
+
+def drops_arg(text: str) -> int:
+    """argparse type: a rain droplet count per frame (0 .. :data:`cdnf_ti.limits.MAX_DROPS`)."""
+    from .limits import MAX_DROPS
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if not math.isfinite(value) or value != int(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text!r}")
+    if value > MAX_DROPS:
+        raise argparse.ArgumentTypeError(f"{text} droplets per frame is too many (at most {MAX_DROPS:,})")
+    return int(value)
 
 
 def seed_arg(text: str) -> int:
@@ -65,8 +120,40 @@ def parse_models(spec: str) -> list[str]:
         return list(MODELS)
     names = [s.strip() for s in spec.split(",") if s.strip()]
     if not names:
-        raise ValueError("no model named")
-    return [get_model_class(n).name for n in names]
+        raise UserError("no model named")
+    try:
+        return list(dict.fromkeys(get_model_class(n).name for n in names))
+    except ValueError as e:
+        raise UserError(str(e)) from None
+
+
+def unique_names(paths: Sequence[str], names: Sequence[str]) -> list[str]:
+    """Output names for inputs, made distinct: inputs sharing a name (``A/clip.mp4``, ``B/clip.mp4``)
+    are named after their folder too (``A_clip``, ``B_clip``), then numbered (``clip-2``) if need be.
+
+    Names are compared case-insensitively (case-insensitive file systems).
+    """
+    def counts(xs):
+        c: dict[str, int] = {}
+        for x in xs:
+            c[x.lower()] = c.get(x.lower(), 0) + 1
+        return c
+
+    c = counts(names)
+    out = []
+    for p, n in zip(paths, names):
+        parent = Path(str(p)).parent.name if c[n.lower()] > 1 else ""
+        out.append(f"{parent}_{n}" if parent else n)
+    seen: dict[str, int] = {}
+    final = []
+    for n in out:
+        k = n.lower()
+        seen[k] = seen.get(k, 0) + 1
+        final.append(n if seen[k] == 1 else f"{n}-{seen[k]}")
+    while len({n.lower() for n in final}) < len(final):  # a numbered name met a real one: number again
+        final = [n if i == [m.lower() for m in final].index(n.lower()) else f"{n}-{i + 1}"
+                 for i, n in enumerate(final)]
+    return final
 
 
 def _videos_parser() -> argparse.ArgumentParser:
@@ -81,30 +168,53 @@ def _videos_parser() -> argparse.ArgumentParser:
                          "'stim:NAME[?coherence=C&seed=S&size=N...]' (see cdnf_ti.inputs)")
     ap.add_argument("--out", default="cdnf_out", help="output folder for traces (default: %(default)s)")
     add_model_options(ap)
-    ap.add_argument("--epsilon", type=float, default=None, help="C-DNF alert margin (default 0.006)")
+    ap.add_argument("--epsilon", type=finite_float, default=None, help="C-DNF alert margin (default 0.006)")
+    ap.add_argument("--fps", type=positive_float, default=None,
+                    help="frame rate of the inputs in frames/s (default: a video's own rate; 30 for image "
+                         "folders and .npy arrays, which carry none)")
+    ap.add_argument("--color-order", choices=("bgr", "rgb"), default="bgr",
+                    help="channel order of colour .npy arrays (default: %(default)s, as OpenCV; arrays "
+                         "from imageio, PIL or matplotlib are rgb). Video files and images are decoded by "
+                         "OpenCV and are always right")
     ap.add_argument("--no-progress", action="store_true", help="hide progress bars")
     ap.add_argument("--rain", action="store_true",
                     help="add synthetic rain (paper defaults) in memory; prints each video's SNR")
     ap.add_argument("--rain-seed", type=seed_arg, default=0, help="rain seed (default: %(default)s)")
-    ap.add_argument("--rain-drops", type=int, default=None,
+    ap.add_argument("--rain-drops", type=drops_arg, default=None,
                     help="rain droplets per frame (default: 500 per 426x240, scaled by area)")
     return ap
 
 
 def run_videos(argv: Sequence[str]) -> int:
-    """Run models over each input, write ``OUT/<clip>.<model>.csv`` and print one line each."""
-    from .atomic import atomic_write_text
-    from .frames import iter_grey
-    from .inputs import resolve_input
-    from .models import create_model
-    from .models.base import run_models
-    from .params import CDNFParams
+    """Run models over each input, write ``OUT/<clip>.<model>.csv`` and print one line each.
+
+    Inputs that share a name get distinct output names (:func:`unique_names`).
+    """
+    from .atomic import atomic_write_text, output_lock, prepare_output
 
     args = _videos_parser().parse_args(argv)
     models = parse_models(args.models)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)  # fail before any work if the folder cannot be made
-    failed = 0
+    check_model_options(args)
+    params = None
+    if args.epsilon is not None and "cdnf" in models:
+        from .params import CDNFParams
+
+        try:
+            params = CDNFParams(epsilon=args.epsilon)
+        except ValueError as e:
+            raise UserError(f"--epsilon: {e}") from None
+    out = prepare_output(args.out)  # before any work
+    with output_lock(out):
+        return _run_videos(args, models, params, Path(args.out), atomic_write_text)
+
+
+def _run_videos(args, models: list[str], params, out: Path, write_text) -> int:
+    from .frames import iter_grey
+    from .inputs import resolve_input
+    from .limits import check_drops, check_frame_size
+    from .models import create_model
+    from .models.base import NotConvergedWarning, run_models
+
     rain_params = None
     if args.rain:
         from .stimuli.rain import RainParams, RainyFrames
@@ -113,54 +223,81 @@ def run_videos(argv: Sequence[str]) -> int:
     columns = ["clip", "model", "frames", "first_alert", "max_output", "fps", "status"]
     if args.rain:
         columns.append("rain_snr_db")
-    summary: list[dict] = []
-    for path in args.inputs:
+    summary: list[dict] = []  # rows in input order ("_i": index of the input)
+    sources: list = []
+    order: list[int] = []
+    for index, path in enumerate(args.inputs):  # open every input first: bad ones are reported before any work
         try:
-            src = resolve_input(path)
-        except InputError as e:
+            src = resolve_input(path, fps=args.fps, color_order=args.color_order)
+            check_frame_size(*src.shape, n_models=len(models), what=str(path))
+            if rain_params is not None:
+                check_drops(args.rain_drops, src.shape, what="--rain-drops")
+            sources.append((path, src))
+            order.append(index)
+        except UserError as e:
             print(f"error: {e}", file=sys.stderr)
-            failed += 1
-            summary.append({"clip": Path(path).stem, "status": f"error: {e.problem}"})
-            continue
-        params = CDNFParams(epsilon=args.epsilon) if args.epsilon is not None else None
+            problem = e.problem if isinstance(e, InputError) else str(e)
+            summary.append({"_i": index, "clip": Path(str(path)).stem, "model": ",".join(models),
+                            "status": f"error: {problem}"})
+    names = unique_names([str(p) for p, _ in sources], [src.name for _, src in sources])
+    dup = [(p, n) for (p, src), n in zip(sources, names) if n != src.name]
+    if dup:
+        print("note: inputs share a name; output names: " + ", ".join(f"{p} -> {n}" for p, n in dup),
+              file=sys.stderr)
+    ran = 0
+    for (path, src), clip, index in zip(sources, names, order):
         instances = [create_model(name, params if name == "cdnf" else None, backend=args.backend,
                                   arch=args.arch, fps=src.fps) for name in models]
+        rain = None
+        errors: list = []
         try:
             with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
+                warnings.simplefilter("ignore", NotConvergedWarning)  # reported per line below
                 frames = iter_grey(src)
-                rain = None
                 if rain_params is not None:
                     rain = RainyFrames(frames, rain_params, seed=args.rain_seed)
                     frames = iter(rain)
                 # one pass over the input: each frame is decoded (and rained on) once for all models
-                traces = run_models(instances, frames, total=src.n_frames,
-                                    progress=False if args.no_progress else f"{src.name} [{', '.join(models)}]")
+                traces = run_models(instances, frames, total=src.n_frames, errors=errors,
+                                    progress=False if args.no_progress else f"{clip} [{', '.join(models)}]")
         except InputError as e:
             print(f"error: {e}", file=sys.stderr)
-            failed += 1
-            summary.append({"clip": src.name, "model": ",".join(models), "status": f"error: {e.problem}"})
+            summary.append({"_i": index, "clip": clip, "model": ",".join(models), "status": f"error: {e.problem}"})
             continue
-        for name, trace in zip(models, traces):
-            trace.to_csv(out / f"{src.name}.{name}.csv")
+        for name, trace, err in zip(models, traces, errors):
+            if err is not None:
+                msg = str(err) if isinstance(err, UserError) else f"{type(err).__name__}: {err}"
+                print(f"error: {path} [{name}]: {msg}".splitlines()[0], file=sys.stderr)
+                summary.append({"_i": index, "clip": clip, "model": name,
+                                "status": f"error: {msg}".splitlines()[0]})
+                continue
+            ran += 1
+            trace.to_csv(out / f"{clip}.{name}.csv")
             fa = trace.first_alert
             fa_txt = f"{fa} ({fa / src.fps:.2f} s)" if fa is not None else "none"
             unconv = int((~trace.converged).sum())
             note = f", {unconv} frames NOT converged" if unconv else ""
             if rain is not None:
                 note += f", rain SNR {rain.snr_db:.2f} dB"
-            print(f"{path} [{name}]: {trace.n_frames} frames, first alert {fa_txt}, "
-                  f"max {trace.output_name} {trace.output.max():.4f}, {trace.fps:.1f} fps{note}")
-            summary.append({"clip": src.name, "model": name, "frames": trace.n_frames,
+            fps = trace.fps
+            fps_txt = f"{fps:.1f} fps" if math.isfinite(fps) else "n/a fps (one frame)"
+            out_name = "" if clip == src.name else f" -> {clip}"
+            print(f"{path}{out_name} [{name}]: {trace.n_frames} frames, first alert {fa_txt}, "
+                  f"max {trace.output_name} {trace.output.max():.4f}, {fps_txt}{note}")
+            summary.append({"_i": index, "clip": clip, "model": name, "frames": trace.n_frames,
                             "first_alert": "" if fa is None else fa, "max_output": f"{trace.output.max():.6f}",
-                            "fps": f"{trace.fps:.2f}", "status": "ok" if not unconv else "unconverged",
+                            "fps": f"{fps:.2f}" if math.isfinite(fps) else "",
+                            "status": "ok" if not unconv else "unconverged",
                             "rain_snr_db": f"{rain.snr_db:.4f}" if rain is not None else ""})
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore", lineterminator="\n")
     writer.writeheader()
-    writer.writerows(summary)
-    atomic_write_text(out / "summary.csv", buf.getvalue())
-    return EXIT_USAGE if failed else EXIT_OK
+    writer.writerows(sorted(summary, key=lambda r: r["_i"]))
+    write_text(out / "summary.csv", buf.getvalue())
+    n_failed = sum(1 for r in summary if str(r.get("status", "")).startswith("error"))
+    if n_failed == 0:
+        return EXIT_OK
+    return EXIT_FAILED if ran else EXIT_USAGE
 
 
 def _load(target: str) -> Callable[[Sequence[str]], int]:
@@ -169,7 +306,11 @@ def _load(target: str) -> Callable[[Sequence[str]], int]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the process exit code."""
+    """Entry point; returns the process exit code (see the module docstring).
+
+    A :class:`~cdnf_ti.errors.UserError` becomes one ``error:`` line and exit
+    code 2; any other exception propagates with its traceback (it is a bug).
+    """
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         if not argv:
@@ -177,22 +318,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         if argv[0] in SUBCOMMANDS:
             return _load(SUBCOMMANDS[argv[0]])(argv[1:])
         return run_videos(argv)
-    except InputError as e:
+    except UserError as e:
         print(f"error: {e}", file=sys.stderr)
-        return EXIT_USAGE
-    except ValueError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return EXIT_USAGE
-    except BackendUnavailableError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return EXIT_USAGE
-    except OSError as e:  # e.g. an output folder that cannot be created or written
-        where = e.filename if e.filename is not None else "output"
-        print(f"error: {where}: {e.strerror or e}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+        print("interrupted: finished results are saved; run the same command again to resume",
+              file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":
