@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 import warnings
@@ -21,6 +22,7 @@ def selectivity_table(models: Sequence[str], size: int = 600, backend: str = "ta
         "max_output": float, "frames": int, "fps": float}``.
     """
     from .models import create_model
+    from .models.base import NotConvergedWarning
     from .stimuli.basic import BASIC_STIMULI, basic_stimulus
 
     result: dict[str, dict[str, dict]] = {}
@@ -30,7 +32,7 @@ def selectivity_table(models: Sequence[str], size: int = 600, backend: str = "ta
             s = basic_stimulus(stim, height=size, width=size, start_half_size=size / 60)
             model = create_model(name, backend=backend, arch=arch, fps=s.fps)
             with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
+                warnings.simplefilter("ignore", NotConvergedWarning)  # recorded in "converged"
                 tr = model.run(s.frames(), progress=f"{name} {stim}" if progress else False, total=s.n_frames)
             result[name][stim] = {
                 "alert": int(tr.first_alert is not None),
@@ -63,7 +65,8 @@ def format_table1(result: dict[str, dict[str, dict]]) -> str:
 
 
 def main(argv: Sequence[str] = ()) -> int:
-    from .run import add_model_options, parse_models
+    from .limits import check_frame_size
+    from .run import add_model_options, check_model_options, parse_models
 
     ap = argparse.ArgumentParser(prog="python -m cdnf_ti.run demo",
                                  description="Basic selectivity (paper Table I) on the six basic stimuli.")
@@ -72,6 +75,8 @@ def main(argv: Sequence[str] = ()) -> int:
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(list(argv))
     models = parse_models(args.models)
+    check_frame_size(args.size, args.size, n_models=1, what="--size")
+    check_model_options(args)
     t0 = time.perf_counter()
     print(f"cdnf_ti demo: basic selectivity on six {args.size}x{args.size} stimuli at 30 fps "
           f"(models: {', '.join(models)})", flush=True)
@@ -79,7 +84,9 @@ def main(argv: Sequence[str] = ()) -> int:
     print(format_table1(res))
     for m in models:
         fps = [r["fps"] for r in res[m].values()]
-        print(f"{m}: {sum(fps) / len(fps):.1f} frames/s on average; max output per stimulus: "
+        fps = [f for f in fps if math.isfinite(f)]
+        rate = f"{sum(fps) / len(fps):.1f} frames/s on average" if fps else "frame rate n/a"
+        print(f"{m}: {rate}; max output per stimulus: "
               + ", ".join(f"{k}={v['max_output']:.4f}" for k, v in res[m].items()))
     print(f"done in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     return 0

@@ -19,15 +19,15 @@ from pathlib import Path
 from typing import Sequence
 
 from . import __version__
-from .errors import InputError
-from .run import seed_arg
+from .errors import OutputError, UserError
+from .run import drops_arg, positive_float, seed_arg
 
 
 def _add_rain_options(ap: argparse.ArgumentParser, flag: bool) -> None:
     if flag:
         ap.add_argument("--rain", action="store_true", help="add synthetic rain (paper defaults)")
     ap.add_argument("--rain-seed", type=seed_arg, default=0, help="rain seed (default: %(default)s)")
-    ap.add_argument("--rain-drops", type=int, default=None,
+    ap.add_argument("--rain-drops", type=drops_arg, default=None,
                     help="droplets per frame (default: 500 per 426x240, scaled by area)")
 
 
@@ -55,21 +55,34 @@ def generate_main(argv: Sequence[str]) -> int:
                     help="frame height = width in px (default 600); start half-size scales as size/60")
     ap.add_argument("--height", type=int, default=None)
     ap.add_argument("--width", type=int, default=None)
-    ap.add_argument("--fps", type=float, default=None, help="frames per second (default 30)")
-    ap.add_argument("--duration", type=float, default=None, help="motion duration in s (default 1.5)")
+    ap.add_argument("--fps", type=positive_float, default=None, help="frames per second (default 30)")
+    ap.add_argument("--duration", type=positive_float, default=None, help="motion duration in s (default 1.5)")
     _add_rain_options(ap, flag=True)
     ap.add_argument("--out", required=True, help="output .avi (FFV1) or folder (PNG frames)")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(list(argv))
+    from .atomic import prepare_output
+    from .limits import check_drops, check_frame_size
+
     output_format(args.out)
+    size = args.size if args.size is not None else 600
+    height = args.height if args.height is not None else size
+    width = args.width if args.width is not None else size
+    check_frame_size(height, width, n_models=0, what="frame size")
+    if args.rain:
+        check_drops(args.rain_drops, (height, width), what="--rain-drops")
+    prepare_output(Path(args.out).parent)  # before any work: the output's folder must be writable
     kw: dict = {}
     if args.size is not None:
         kw.update(height=args.size, width=args.size, start_half_size=args.size / 60.0)
     for k in ("height", "width", "fps", "duration"):
         if getattr(args, k) is not None:
             kw[k] = getattr(args, k)
-    base = basic_stimulus(args.name, **kw)
-    stim = IncoherentStimulus(base, args.coherence, args.seed)
+    try:  # the stimulus classes check their parameters (coherence in (0, 1], ...)
+        base = basic_stimulus(args.name, **kw)
+        stim = IncoherentStimulus(base, args.coherence, args.seed)
+    except (ValueError, TypeError) as e:
+        raise UserError(str(e)) from None
     frames = stim.frames()
     rain = None
     if args.rain:
@@ -112,26 +125,33 @@ def rain_main(argv: Sequence[str]) -> int:
     ap.add_argument("inputs", nargs="+", metavar="VIDEO", help="video file, image folder, .npy, or stim:NAME?...")
     ap.add_argument("--out", required=True, help="output folder")
     ap.add_argument("--seed", type=seed_arg, default=0, help="rain seed (default: %(default)s)")
-    ap.add_argument("--drops", type=int, default=None,
+    ap.add_argument("--drops", type=drops_arg, default=None,
                     help="droplets per frame (default: 500 per 426x240, scaled by area)")
     ap.add_argument("--format", choices=("avi", "png"), default="avi", help="FFV1 AVI (default) or PNG folders")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(list(argv))
     from .stimuli.rain import RainParams
 
+    from .atomic import prepare_output
+    from .limits import check_drops, check_frame_size
+
     params = RainParams(drops=args.drops)
-    out = Path(args.out)
+    out = prepare_output(args.out)  # before any work
     failed = 0
     snrs = []
     for spec in args.inputs:
         t0 = time.perf_counter()
         try:
             src = resolve_input(spec)
+            check_frame_size(*src.shape, n_models=0, what=str(spec))
+            check_drops(args.drops, src.shape, what="--drops")
             target = out / (f"{src.name}_rain.avi" if args.format == "avi" else f"{src.name}_rain")
             rain = RainyFrames(iter_grey(src), params, seed=args.seed)
             n = write_frames(rain, target, fps=src.fps, progress=False if args.no_progress else src.name,
                              total=src.n_frames)
-        except InputError as e:
+        except UserError as e:
+            if isinstance(e, OutputError):
+                raise  # the output cannot be written: the other inputs would fail the same way
             print(f"error: {e}", file=sys.stderr)
             failed += 1
             continue
@@ -153,4 +173,6 @@ def rain_main(argv: Sequence[str]) -> int:
         print(f"{spec}: {n} frames -> {target}, SNR {rain.snr_db:.2f} dB ({time.perf_counter() - t0:.1f} s)")
     if len(snrs) > 1:
         print(f"mean SNR over {len(snrs)} videos: {sum(snrs) / len(snrs):.2f} dB")
-    return 2 if failed else 0
+    if not failed:
+        return 0
+    return 1 if snrs else 2  # as `run`: 1 = some inputs failed, 2 = none could be done

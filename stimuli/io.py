@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from ..atomic import atomic_write, atomic_write_json
-from ..errors import InputError
+from ..errors import InputError, OutputError, output_error
 
 FORMATS = ("avi", "png")
 
@@ -47,6 +47,17 @@ def to_uint8(frame: np.ndarray) -> np.ndarray:
     if a.dtype == np.uint8:
         return np.ascontiguousarray(a)
     return np.clip(np.rint(a.astype(np.float64) * 255.0), 0, 255).astype(np.uint8)
+
+
+def _write_failure(path: Path) -> str:
+    """Why writing next to ``path`` probably failed: the free space on its file system."""
+    try:
+        free = shutil.disk_usage(path.parent).free
+    except OSError:
+        return "write error"
+    if free < 16 * 2**20:
+        return f"No space left on device: {free / 2**20:.1f} MB free"
+    return "write error or file size limit"
 
 
 def write_frames(frames: Iterable[np.ndarray], path: str | os.PathLike, fps: float = 30.0,
@@ -104,20 +115,27 @@ def write_frames(frames: Iterable[np.ndarray], path: str | os.PathLike, fps: flo
                 stored = int(check.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
                 stored_fps = float(check.get(cv2.CAP_PROP_FPS) or 0.0)
                 check.release()
-                if stored != count or abs(stored_fps - float(fps)) > 1e-3 * float(fps):
+                fps_ok = abs(stored_fps - float(fps)) <= 1e-3 * float(fps)
+                if stored != count and (fps_ok or stored == 0):  # not the frame rate: the write failed
+                    raise OutputError(path, f"only {stored} of {count} frames could be written "
+                                            f"({_write_failure(path)})")
+                if stored != count or not fps_ok:
                     raise InputError(path, f"the AVI holds {stored} frames at {stored_fps:g} fps instead of "
                                            f"{count} at {float(fps):g} fps (frame rate not representable); "
                                            "write PNG frames (a folder name) instead")
 
             atomic_write(path, write)
         else:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+            except OSError as e:
+                raise output_error(path, e) from None
             try:
                 for f in frames:
                     g = to_uint8(f)
                     if not cv2.imwrite(str(tmp / f"{count:06d}.png"), g):
-                        raise InputError(path, f"cannot write PNG frame {count}")
+                        raise OutputError(path, f"cannot write PNG frame {count} ({_write_failure(path)})")
                     count += 1
                     if bar is not None:
                         bar.update(1)
@@ -128,6 +146,9 @@ def write_frames(frames: Iterable[np.ndarray], path: str | os.PathLike, fps: flo
                         raise InputError(path, "exists and is not a folder")
                     shutil.rmtree(path)
                 os.replace(tmp, path)
+            except OSError as e:
+                shutil.rmtree(tmp, ignore_errors=True)
+                raise output_error(path, e) from None
             except BaseException:
                 shutil.rmtree(tmp, ignore_errors=True)
                 raise

@@ -1,7 +1,14 @@
 """Command lines ``python -m cdnf_ti.run dataset ...`` and ``python -m cdnf_ti.run experiment ...``.
 
-Exit codes: 0 all done; 1 the run finished but some clip/model failed (error
-rows in results.csv); 2 bad usage or a bad labels file (nothing was run).
+Exit codes (as for ``run``): 0 all done; 1 the run finished but some
+clip/model failed (error rows in results.csv); 2 bad usage, an unavailable
+``--arch``, an output folder that cannot be written or a bad labels file
+(nothing was run); 130 interrupted (finished work is kept; rerun to resume).
+
+Everything the command needs is checked before any work: options, the Taichi
+arch, the labels and videos, and that ``--out`` can be written. ``--out`` is
+locked for the run: a second run into the same folder waits for the first and
+then reuses its results.
 """
 from __future__ import annotations
 
@@ -10,7 +17,7 @@ import sys
 from pathlib import Path
 from typing import Sequence
 
-from ..errors import InputError
+from ..errors import InputError, UserError
 from ..run import seed_arg
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
@@ -56,20 +63,46 @@ def _dataset(args, folder: Path, out: Path) -> int:
     from .reports import table2_markdown
     from .scoring import Padding
 
+    from ..run import check_model_options
+
     models = parse_models(args.models)
+    check_model_options(args)
     run = run_dataset(folder, args.labels, out, models=models, rain=args.rain,
                       padding=Padding(args.pad_before, args.pad_after), seed=args.seed, workers=args.workers,
                       scheduler=args.scheduler, backend=args.backend, arch=args.arch,
                       progress=not args.no_progress, figures=not args.no_figures)
     print(table2_markdown(run.summary["results"], run.models, run.conditions))
+    for line in headline(run):
+        print(line)
     print(f"{len(run.labels)} clips x {len(run.models)} models x {len(run.conditions)} conditions: "
           f"{run.ran} run now, {run.skipped} reused; results in {out}/ (results.csv, summary.md)")
+    if run.unlabelled:
+        shown = ", ".join(run.unlabelled[:10]) + (", ..." if len(run.unlabelled) > 10 else "")
+        print(f"note: {len(run.unlabelled)} video(s) in {folder} have no row in the labels file and were "
+              f"not run: {shown}", file=sys.stderr)
     for e in run.summary["errors"]:
         print(f"error: {e['error']} [{e['model']}, {e['condition']}]", file=sys.stderr)
     if run.failed:
         print(f"{run.n_errors} clip/model run(s) failed; see {out}/results.csv", file=sys.stderr)
         return EXIT_FAILED
     return EXIT_OK
+
+
+def headline(run) -> list[str]:
+    """One line per model and condition: accuracy, how many clips were scored and how many failed."""
+    from .reports import pct
+
+    lines = []
+    for m in run.models:
+        for c in run.conditions:
+            rows = [r for r in run.rows if r["model"] == m and r["condition"] == c]
+            failed = sum(1 for r in rows if r.get("error"))
+            scored = len(rows) - failed
+            d = (run.summary.get("results", {}).get(m) or {}).get(c) or {}
+            acc = pct(d.get("accuracy")) if scored else "n/a"
+            lines.append(f"{m}, {c}: accuracy {acc} over {scored} scored clip(s) of {len(rows)}"
+                         + (f"; {failed} failed (not scored)" if failed else ""))
+    return lines
 
 
 def dataset_main(argv: Sequence[str]) -> int:
@@ -105,7 +138,10 @@ def experiment_main(argv: Sequence[str]) -> int:
         p.add_argument("--out", default=f"cdnf_experiments/{name}", help="output folder (default: %(default)s)")
         add_model_options(p, default_models="all")
         p.add_argument("--size", type=int, default=160,
-                       help="frame side in px (default: %(default)s for speed; the paper uses 600)")
+                       help="frame side in px (default: %(default)s, so that the whole experiment runs in "
+                            "minutes; the paper and `demo` use 600 and the stimuli scale with the size, "
+                            "but a model's alert can differ near its threshold; use --size 600 to "
+                            "reproduce the paper exactly)")
         _add_parallel(p)
     p2.add_argument("--coherences", default=",".join(f"{c:g}" for c in builtin.COHERENCES),
                     help="comma-separated coherence degrees in (0, 1] (default: %(default)s)")
@@ -123,9 +159,21 @@ def experiment_main(argv: Sequence[str]) -> int:
             raise InputError("table2", "no labelled folder given and ../shared/data/real was not found; "
                                        "pass one: python -m cdnf_ti.run experiment table2 DIR")
         return _dataset(args, folder, Path(args.out))
+    from ..atomic import output_lock, prepare_output
+    from ..limits import check_frame_size
+    from ..run import check_model_options
+
     if args.size < 16:
-        raise ValueError(f"--size must be at least 16 px, got {args.size}")
+        raise UserError(f"--size must be at least 16 px, got {args.size}")
+    check_frame_size(args.size, args.size, n_models=1, what="--size")
     models = parse_models(args.models)
+    check_model_options(args)
+    out = prepare_output(args.out)  # before any work
+    with output_lock(out):
+        return _stimulus_experiment(args, models, builtin)
+
+
+def _stimulus_experiment(args, models, builtin) -> int:
     kw = dict(size=args.size, seed=args.seed, workers=args.workers, scheduler=args.scheduler,
               backend=args.backend, arch=args.arch, progress=not args.no_progress, figures=not args.no_figures)
     if args.which == "table1":
@@ -141,16 +189,19 @@ def experiment_main(argv: Sequence[str]) -> int:
         try:
             coh = [float(c) for c in args.coherences.split(",") if c.strip()]
         except ValueError:
-            raise ValueError(f"--coherences must be numbers, got {args.coherences!r}") from None
+            raise UserError(f"--coherences must be numbers, got {args.coherences!r}") from None
         if not coh:
-            raise ValueError("--coherences is empty")
+            raise UserError("--coherences is empty")
+        bad_c = [c for c in coh if not (0.0 < c <= 1.0)]
+        if bad_c:
+            raise UserError(f"--coherences: coherence must be in (0, 1], got {bad_c[0]:g}")
         stimuli = [s.strip() for s in args.stimuli.split(",")] if args.stimuli else None
         if stimuli:
             from ..stimuli.basic import BASIC_STIMULI
 
             bad = [s for s in stimuli if s not in BASIC_STIMULI]
             if bad:
-                raise ValueError(f"unknown stimulus {bad[0]!r}; choose from {', '.join(BASIC_STIMULI)}")
+                raise UserError(f"unknown stimulus {bad[0]!r}; choose from {', '.join(BASIC_STIMULI)}")
         table = builtin.coherence_sweep(models, args.out, coherences=coh, stimuli=stimuli, **kw)
         print(builtin.coherence_markdown(table, coh, args.size))
         errs = [r for t in table.values() for d in t.values() for r in d.values() if r.get("error")]

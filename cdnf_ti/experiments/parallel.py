@@ -144,6 +144,7 @@ class _Reporter:
         self.enabled = bool(progress)
         self.label = progress if isinstance(progress, str) else "tasks"
         self.t0 = time.perf_counter()
+        self.started: dict[int, float] = {}
         self.tty = self.enabled and _isatty(sys.stderr)
         self.bar = None
         if self.tty and n:
@@ -157,9 +158,13 @@ class _Reporter:
                 return self.describe(self.tasks[i], res)
             except Exception:  # noqa: BLE001 - a report must not break the run
                 pass
-        return f"task {i + 1}"
+        text = _task_name(self.tasks[i]) or f"task {i + 1}"
+        if res is not None and i in self.started:
+            text += f": {time.perf_counter() - self.started[i]:.1f} s"
+        return text
 
     def starting(self, i: int) -> None:
+        self.started[i] = time.perf_counter()
         if self.bar is not None:
             self.bar.set_postfix_str(self._text(i, None), refresh=True)
 
@@ -193,6 +198,25 @@ class _Reporter:
         if self.bar is not None:
             self.bar.close()
             self.bar = None
+
+
+#: Task attributes named in progress lines, in this order.
+_NAME_FIELDS = ("clip", "stimulus", "model", "models", "condition", "coherence")
+
+
+def _task_name(task: Any) -> str:
+    """``"dark_looming [cdnf, clean]"`` from a task's clip/stimulus/model/condition attributes ('' if none)."""
+    vals = []
+    for f in _NAME_FIELDS:
+        v = getattr(task, f, None)
+        if v is None:
+            continue
+        if isinstance(v, (tuple, list)):
+            v = ", ".join(map(str, v))
+        vals.append(f"c={v:g}" if f == "coherence" and isinstance(v, float) else str(v))
+    if not vals:
+        return ""
+    return vals[0] + (f" [{', '.join(vals[1:])}]" if len(vals) > 1 else "")
 
 
 def _isatty(stream) -> bool:
