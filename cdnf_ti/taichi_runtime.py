@@ -69,8 +69,8 @@ def check_arch(arch: str, timeout: float = 120.0) -> str:
         raise UserError(f"unknown arch {arch!r}; choose one of {', '.join(ARCHS)}")
     if arch == "cpu":
         return "cpu"
-    if _arch is not None:  # already running here: ensure_taichi decides
-        return _arch
+    if _arch is not None and (_arch == arch or (arch == "gpu" and _arch != "cpu")):
+        return _arch  # already running on it in this process
     if arch not in _probed:
         try:
             proc = subprocess.run([sys.executable, "-c", _PROBE, arch], capture_output=True, text=True,

@@ -114,11 +114,15 @@ def write_frames(frames: Iterable[np.ndarray], path: str | os.PathLike, fps: flo
                 check = cv2.VideoCapture(tmp)  # the container must hold every frame at this fps
                 stored = int(check.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
                 stored_fps = float(check.get(cv2.CAP_PROP_FPS) or 0.0)
+                last_ok = False
+                if stored > 0:  # a file cut short (full disk) still states the full count in its header
+                    check.set(cv2.CAP_PROP_POS_FRAMES, stored - 1)
+                    last_ok = bool(check.read()[0])
                 check.release()
                 fps_ok = abs(stored_fps - float(fps)) <= 1e-3 * float(fps)
-                if stored != count and (fps_ok or stored == 0):  # not the frame rate: the write failed
-                    raise OutputError(path, f"only {stored} of {count} frames could be written "
-                                            f"({_write_failure(path)})")
+                if not last_ok or (stored != count and fps_ok):  # not the frame rate: the write failed
+                    raise OutputError(path, f"the file was cut short: not all {count} frames could be "
+                                            f"written ({_write_failure(path)})")
                 if stored != count or not fps_ok:
                     raise InputError(path, f"the AVI holds {stored} frames at {stored_fps:g} fps instead of "
                                            f"{count} at {float(fps):g} fps (frame rate not representable); "

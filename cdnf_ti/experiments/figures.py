@@ -29,9 +29,12 @@ WINDOW_COLOUR = "#f4a6c0"  # the paper shades the collision period pink
 
 
 def _plt():
+    import sys
+
     import matplotlib
 
-    matplotlib.use("Agg", force=True)
+    if "matplotlib.pyplot" not in sys.modules and not os.environ.get("MPLBACKEND"):
+        matplotlib.use("Agg")  # files only; a host program's (notebook's) own backend is never switched
     import matplotlib.pyplot as plt
 
     return plt

@@ -1,0 +1,42 @@
+"""Task functions for the fault tests (top level, so spawned worker processes can import them)."""
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+
+def sleep_then_pid(seconds: float) -> int:
+    """Sleep ``seconds``, return the worker's pid."""
+    time.sleep(seconds)
+    return os.getpid()
+
+
+def die_on(task: str) -> str:
+    """``"die"`` kills its worker process (as the OOM killer would); anything else returns itself."""
+    if task == "die":
+        os._exit(9)
+    time.sleep(0.1)
+    return task
+
+
+def die_first_time(marker: str) -> str:
+    """Kill the worker the first time (leaving ``marker``); succeed when run again."""
+    p = Path(marker)
+    if not p.exists():
+        p.write_text("died once")
+        os._exit(9)
+    return "ok"
+
+
+def main_map_slow(n_slow: int = 6) -> None:
+    """Script body: one quick task then slow ones over 2 local workers; prints each result."""
+    from cdnf_ti.experiments.parallel import map_tasks
+
+    try:
+        for i, r in map_tasks(sleep_then_pid, [0.05] + [60.0] * n_slow, workers=2):
+            print("done", i, r, flush=True)
+    except KeyboardInterrupt:
+        print("interrupted", flush=True)
+        sys.exit(130)
