@@ -311,6 +311,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     A :class:`~cdnf_ti.errors.UserError` becomes one ``error:`` line and exit
     code 2; any other exception propagates with its traceback (it is a bug).
     """
+    from .experiments.parallel import exit_on_second_interrupt
+
+    if argv is None:  # run as a program: a second Ctrl-C after a first one ends it at once
+        exit_on_second_interrupt(True)
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         if not argv:

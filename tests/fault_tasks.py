@@ -32,10 +32,11 @@ def die_first_time(marker: str) -> str:
 
 def main_map_slow(n_slow: int = 6) -> None:
     """Script body: one quick task then slow ones over 2 local workers; prints each result."""
-    from cdnf_ti.experiments.parallel import map_tasks
+    from cdnf_ti.experiments.parallel import exit_on_second_interrupt, map_tasks
 
+    exit_on_second_interrupt(True)  # as the command line does
     try:
-        for i, r in map_tasks(sleep_then_pid, [0.05] + [60.0] * n_slow, workers=2):
+        for i, r in map_tasks(sleep_then_pid, [0.05] + [60.0] * n_slow, workers=2, arch=None):
             print("done", i, r, flush=True)
     except KeyboardInterrupt:
         print("interrupted", flush=True)

@@ -135,7 +135,7 @@ def test_dead_worker_task_is_retried_once_then_recorded_as_failed():
     from cdnf_ti.experiments.parallel import TaskFailed, map_tasks
     from fault_tasks import die_on
 
-    res = dict(map_tasks(die_on, ["a", "die", "b", "c"], workers=2))
+    res = dict(map_tasks(die_on, ["a", "die", "b", "c"], workers=2, arch=None))
     assert [res[i] for i in (0, 2, 3)] == ["a", "b", "c"]  # the other tasks are not lost
     assert isinstance(res[1], TaskFailed) and "died" in str(res[1]) and "2 times" in str(res[1])
 
@@ -144,7 +144,7 @@ def test_task_whose_worker_died_once_succeeds_on_retry(tmp_path):
     from cdnf_ti.experiments.parallel import map_tasks
     from fault_tasks import die_first_time
 
-    res = dict(map_tasks(die_first_time, [str(tmp_path / "m1"), str(tmp_path / "m2")], workers=2))
+    res = dict(map_tasks(die_first_time, [str(tmp_path / "m1"), str(tmp_path / "m2")], workers=2, arch=None))
     assert res == {0: "ok", 1: "ok"}
 
 

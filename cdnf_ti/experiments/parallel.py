@@ -37,13 +37,13 @@ def taichi_threads_per_worker(workers: int) -> int:
     return max(1, (os.cpu_count() or 1) // max(1, workers))
 
 
-def init_worker(arch: str = "cpu", threads: int | None = None) -> None:
+def init_worker(arch: str | None = "cpu", threads: int | None = None) -> None:
     """Initialise Taichi in a worker process (no-op if already done).
 
     Parameters
     ----------
-    arch : str
-        Taichi architecture.
+    arch : str or None
+        Taichi architecture; None: the tasks do not use Taichi (nothing to initialise).
     threads : int, optional
         Taichi CPU thread-pool size for this process (``TI_CPU_MAX_NUM_THREADS``);
         None leaves Taichi's default (all cores).
@@ -52,7 +52,8 @@ def init_worker(arch: str = "cpu", threads: int | None = None) -> None:
 
     if current_arch() is None and threads:
         os.environ["TI_CPU_MAX_NUM_THREADS"] = str(int(threads))
-    ensure_taichi(arch)
+    if arch is not None:
+        ensure_taichi(arch)
 
 
 def _one_line(e: BaseException) -> str:
@@ -61,7 +62,7 @@ def _one_line(e: BaseException) -> str:
 
 
 def map_tasks(fn: Callable[[Any], Any], tasks: Sequence[Any], *, workers: int | None = None,
-              scheduler: str | Any | None = None, arch: str = "cpu",
+              scheduler: str | Any | None = None, arch: str | None = "cpu",
               progress: bool | str = False, connect_timeout: float = 20.0,
               describe: Callable[[Any, Any], str] | None = None,
               retries: int = 1) -> Iterator[tuple[int, Any]]:
@@ -79,8 +80,8 @@ def map_tasks(fn: Callable[[Any], Any], tasks: Sequence[Any], *, workers: int | 
     scheduler : str or distributed.Client, optional
         Address of a Dask distributed scheduler (``tcp://host:8786``) or a
         connected ``Client``: tasks are submitted to that cluster.
-    arch : str
-        Taichi architecture the workers initialise.
+    arch : str or None
+        Taichi architecture the workers initialise (None: the tasks do not use Taichi).
     progress : bool or str
         Report progress on stderr (a string names the tasks). In a terminal: a
         tqdm bar naming the latest task; elsewhere (logs, pipes): one line per
@@ -286,6 +287,18 @@ def _first_interrupt(signum, frame) -> None:  # noqa: ARG001 - signal handler si
     raise KeyboardInterrupt
 
 
+#: Set by the command line (:func:`cdnf_ti.run.main`): after a first Ctrl-C the process is on its way
+#: out, so a second one ends it at once even after the parallel section. A library host (a notebook)
+#: keeps its own Ctrl-C handling once :func:`map_tasks` returns.
+_EXIT_ON_SECOND_INTERRUPT = False
+
+
+def exit_on_second_interrupt(on: bool = True) -> None:
+    """For command-line programs: after a Ctrl-C that stopped :func:`map_tasks`, a second one exits at once."""
+    global _EXIT_ON_SECOND_INTERRUPT
+    _EXIT_ON_SECOND_INTERRUPT = bool(on)
+
+
 @contextlib.contextmanager
 def _interruptible() -> Iterator[None]:
     """While running parallel tasks: Ctrl-C raises KeyboardInterrupt once; a second Ctrl-C during the
@@ -299,7 +312,14 @@ def _interruptible() -> Iterator[None]:
     signal.signal(signal.SIGINT, _first_interrupt)
     try:
         yield
-    finally:
+    except KeyboardInterrupt:
+        if not _EXIT_ON_SECOND_INTERRUPT:
+            signal.signal(signal.SIGINT, old)
+        raise
+    except BaseException:
+        signal.signal(signal.SIGINT, old)
+        raise
+    else:
         signal.signal(signal.SIGINT, old)
 
 
