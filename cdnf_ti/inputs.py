@@ -63,14 +63,10 @@ def parse_stim_spec(spec: str) -> tuple[str, dict[str, Any]]:
         raise InputError(spec, f"unknown stimulus {name!r}; choose one of {', '.join(BASIC_STIMULI)}")
     params: dict[str, Any] = {}
     for key, val in parse_qsl(query, keep_blank_values=True, strict_parsing=False):
+        if key not in _INT_KEYS + _FLOAT_KEYS:
+            raise InputError(spec, f"unknown parameter {key!r}; known: {', '.join(_INT_KEYS + _FLOAT_KEYS)}")
         try:
-            if key in _INT_KEYS:
-                params[key] = int(val)
-            elif key in _FLOAT_KEYS:
-                params[key] = float(val)
-            else:
-                raise InputError(spec, f"unknown parameter {key!r}; known: "
-                                       f"{', '.join(_INT_KEYS + _FLOAT_KEYS)}")
+            params[key] = int(val) if key in _INT_KEYS else float(val)
         except ValueError:
             raise InputError(spec, f"parameter {key}={val!r} is not a number") from None
     return name, params

@@ -300,6 +300,18 @@ def _run_videos(args, models: list[str], params, out: Path, write_text) -> int:
     return EXIT_FAILED if ran else EXIT_USAGE
 
 
+def _exit_now(code: int) -> None:
+    """Flush stdout/stderr and end the process with ``code`` (no interpreter shutdown)."""
+    import os
+
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(code)
+
+
 def _load(target: str) -> Callable[[Sequence[str]], int]:
     mod, fn = target.split(":")
     return getattr(importlib.import_module(mod), fn)
@@ -313,7 +325,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     from .experiments.parallel import exit_on_second_interrupt
 
-    if argv is None:  # run as a program: a second Ctrl-C after a first one ends it at once
+    program = argv is None
+    if program:  # run as a program: a second Ctrl-C after a first one ends it at once
         exit_on_second_interrupt(True)
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
@@ -326,8 +339,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
+        from .experiments.parallel import stop_all_pools
+
+        stop_all_pools()  # workers are never waited for
         print("interrupted: finished results are saved; run the same command again to resume",
               file=sys.stderr)
+        if program:  # leave now: nothing is left to wait for, and a Ctrl-C during shutdown changes nothing
+            _exit_now(EXIT_INTERRUPTED)
         return EXIT_INTERRUPTED
 
 

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import os
-import sys
 import time
 from pathlib import Path
 
@@ -39,5 +38,8 @@ def main_map_slow(n_slow: int = 6) -> None:
         for i, r in map_tasks(sleep_then_pid, [0.05] + [60.0] * n_slow, workers=2, arch=None):
             print("done", i, r, flush=True)
     except KeyboardInterrupt:
+        from cdnf_ti.experiments.parallel import stop_all_pools
+
+        stop_all_pools()  # as the command line does
         print("interrupted", flush=True)
-        sys.exit(130)
+        os._exit(130)  # as the command line does

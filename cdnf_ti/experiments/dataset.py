@@ -18,7 +18,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import time
 import warnings
 import zlib
 from dataclasses import asdict, dataclass, field
@@ -352,8 +351,6 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
     OutputError
         ``out`` cannot be created or written (before any work starts).
     """
-    from .reports import write_reports
-
     if rain not in RAIN_CHOICES:
         raise UserError(f"--rain must be one of {', '.join(RAIN_CHOICES)}, got {rain!r}")
     folder = Path(folder)

@@ -272,7 +272,7 @@ def die_with_parent(parent_pid: int, poll_s: float = 1.0) -> None:
     threading.Thread(target=watch, name="cdnf_ti-parent-watchdog", daemon=True).start()
 
 
-def _exit_now(signum, frame) -> None:  # noqa: ARG001 - signal handler signature
+def _exit_now(signum, frame) -> None:
     """Second Ctrl-C during clean-up: end the process at once."""
     try:
         sys.stderr.write("interrupted again: exiting now\n")
@@ -281,7 +281,7 @@ def _exit_now(signum, frame) -> None:  # noqa: ARG001 - signal handler signature
         os._exit(130)
 
 
-def _first_interrupt(signum, frame) -> None:  # noqa: ARG001 - signal handler signature
+def _first_interrupt(signum, frame) -> None:
     """First Ctrl-C: arm :func:`_exit_now` for a second one, then stop the run (KeyboardInterrupt)."""
     signal.signal(signal.SIGINT, _exit_now)
     raise KeyboardInterrupt
@@ -312,21 +312,32 @@ def _interruptible() -> Iterator[None]:
     signal.signal(signal.SIGINT, _first_interrupt)
     try:
         yield
-    except KeyboardInterrupt:
-        if not _EXIT_ON_SECOND_INTERRUPT:
+    finally:
+        interrupted = signal.getsignal(signal.SIGINT) is _exit_now
+        if not (interrupted and _EXIT_ON_SECOND_INTERRUPT) and \
+                threading.current_thread() is threading.main_thread():
             signal.signal(signal.SIGINT, old)
-        raise
-    except BaseException:
-        signal.signal(signal.SIGINT, old)
-        raise
-    else:
-        signal.signal(signal.SIGINT, old)
+
+
+#: Local pools in use, so that :func:`stop_all_pools` can stop them when Ctrl-C lands outside map_tasks.
+_LIVE_POOLS: set = set()
+
+
+def stop_all_pools() -> None:
+    """Stop every local worker pool of this process now (cancel queued tasks, kill the workers).
+
+    The command line calls this on Ctrl-C, so that a pool whose consumer was
+    interrupted is not waited for at interpreter exit.
+    """
+    for ex in list(_LIVE_POOLS):
+        _stop_pool(ex)
 
 
 def _stop_pool(ex: ProcessPoolExecutor | None) -> None:
     """Cancel queued tasks and stop the workers now (no waiting for running tasks)."""
     if ex is None:
         return
+    _LIVE_POOLS.discard(ex)
     procs = list((getattr(ex, "_processes", None) or {}).values())
     ex.shutdown(wait=False, cancel_futures=True)
     for p in procs:
@@ -352,6 +363,7 @@ def _local(fn, tasks, workers, arch, rep, retries=1) -> Iterator[tuple[int, Any]
             if ex is None:
                 ex = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_local_worker,
                                          initargs=(arch, threads, os.getpid()))
+                _LIVE_POOLS.add(ex)
             if retry:
                 if not inflight:
                     i = retry.popleft()
@@ -388,6 +400,7 @@ def _local(fn, tasks, workers, arch, rep, retries=1) -> Iterator[tuple[int, Any]
         raise
     else:
         if ex is not None:
+            _LIVE_POOLS.discard(ex)
             ex.shutdown(wait=True)
 
 
