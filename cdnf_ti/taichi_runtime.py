@@ -25,6 +25,8 @@ _lock = threading.Lock()
 _probed: dict[str, str | None] = {}
 
 _CPU_NAMES = ("x64", "arm64")
+#: Environment variable prefix recording a successful probe, so worker processes need not probe again.
+_ENV_OK = "CDNF_TI_ARCH_OK_"
 
 
 class BackendUnavailableError(UserError):
@@ -71,6 +73,9 @@ def check_arch(arch: str, timeout: float = 120.0) -> str:
         return "cpu"
     if _arch is not None and (_arch == arch or (arch == "gpu" and _arch != "cpu")):
         return _arch  # already running on it in this process
+    known = os.environ.get(_ENV_OK + arch)  # probed by a parent process (workers inherit the answer)
+    if arch not in _probed and known:
+        _probed[arch] = known
     if arch not in _probed:
         try:
             proc = subprocess.run([sys.executable, "-c", _PROBE, arch], capture_output=True, text=True,
@@ -81,6 +86,7 @@ def check_arch(arch: str, timeout: float = 120.0) -> str:
             _probed[arch] = None
     if _probed[arch] is None:
         raise _unavailable(arch)
+    os.environ[_ENV_OK + arch] = _probed[arch]  # type: ignore[assignment]
     return _probed[arch]  # type: ignore[return-value]
 
 
