@@ -56,7 +56,10 @@ def format_table1(result: dict[str, dict[str, dict]]) -> str:
     for stim in BASIC_STIMULI:
         cells = []
         for m in models:
-            got = result[m][stim]["alert"]
+            got = (result[m].get(stim) or {}).get("alert")
+            if got is None:  # the run failed (its error is reported separately)
+                cells.append("error")
+                continue
             paper = TABLE1.get(m, {}).get(stim)
             mark = "" if paper is None else (f" ({paper})" if paper == got else f" ({paper}) differs")
             cells.append(f"{got}{mark}")
