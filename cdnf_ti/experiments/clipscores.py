@@ -96,19 +96,28 @@ def roc(first_alerts: Mapping[str, Sequence[int | None]], labels: Mapping[str, C
         f = sum(first_alerts[c][j] is not None for c in non)
         hits.append(h / len(col) if col else float("nan"))
         fas.append(f / len(non) if non else float("nan"))
+    xs, ys = roc_envelope(hits, fas)
     auc = None
-    if col and non and levels:
-        best: dict[float, float] = {0.0: 0.0}
-        for h, f in zip(hits, fas):
-            best[f] = max(best.get(f, 0.0), h)
-        # the most permissive level: the one with the most alerts (highest false-alarm rate, then hit rate)
-        j_perm = max(range(len(levels)), key=lambda j: (fas[j], hits[j]))
-        best[1.0] = max(best.get(1.0, 0.0), hits[j_perm])
-        xs = sorted(best)
-        ys = [best[x] for x in xs]
-        ys = list(np.maximum.accumulate(ys))  # a lower threshold can always be ignored: upper envelope
-        auc = float(np.trapz(ys, xs)) if hasattr(np, "trapz") else float(np.trapezoid(ys, xs))
+    if col and non and len(levels):
+        auc = float(np.sum((np.diff(xs)) * (np.asarray(ys[1:]) + np.asarray(ys[:-1])) / 2.0))
     return ROC([float(v) for v in levels], hits, fas, auc, len(col), len(non))
+
+
+def roc_envelope(hit_rate: Sequence[float], false_alarm_rate: Sequence[float]) -> tuple[list[float], list[float]]:
+    """The curve whose area is the AUC: (0, 0), the best hit rate at each false-alarm
+    rate (made non-decreasing: a more permissive level can always be ignored) and
+    (1, hit rate of the most permissive level)."""
+    pts = [(f, h) for f, h in zip(false_alarm_rate, hit_rate) if np.isfinite(f) and np.isfinite(h)]
+    if not pts:
+        return [0.0, 1.0], [0.0, 0.0]
+    best: dict[float, float] = {0.0: 0.0}
+    for f, h in pts:
+        best[f] = max(best.get(f, 0.0), h)
+    f_perm, h_perm = max(pts)
+    best[1.0] = max(best.get(1.0, 0.0), h_perm)
+    xs = sorted(best)
+    ys = list(np.maximum.accumulate([best[x] for x in xs]))
+    return [float(x) for x in xs], [float(y) for y in ys]
 
 
 @dataclass

@@ -114,3 +114,45 @@ def markdown_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> list
     for r in rows:
         lines.append("| " + " | ".join("" if v is None else str(v) for v in r) + " |")
     return lines
+
+
+def add_markdown(page: Page, md: str) -> None:
+    """Append the Markdown that cdnf_ti writes (headings, bullet lists, pipe tables, paragraphs) to ``page``.
+
+    Only that subset is understood; the top-level ``#`` heading is skipped (the page has its title).
+    """
+    lines = md.splitlines()
+    i = 0
+    bullets: list[str] = []
+
+    def flush() -> None:
+        if bullets:
+            page.bullets([b.replace("`", "") for b in bullets])
+            bullets.clear()
+
+    while i < len(lines):
+        ln = lines[i].rstrip()
+        if ln.startswith("|"):
+            flush()
+            block = []
+            while i < len(lines) and lines[i].startswith("|"):
+                block.append(lines[i].strip())
+                i += 1
+            cells = [[c.strip().replace("`", "") for c in row.strip("|").split(" | ")] for row in block]
+            body = [r for r in cells[1:] if not all(set(c) <= set("-: ") for c in r)]
+            page.table(cells[0], body)
+            continue
+        if ln.startswith("#"):
+            flush()
+            level = len(ln) - len(ln.lstrip("#"))
+            if level > 1:
+                page.heading(ln.lstrip("#").strip().replace("`", ""), min(level, 4))
+        elif ln.startswith("- "):
+            bullets.append(ln[2:])
+        elif ln.strip():
+            flush()
+            page.paragraph(ln.replace("`", ""))
+        else:
+            flush()
+        i += 1
+    flush()
