@@ -61,6 +61,11 @@ def _dataset(args, folder: Path, out: Path) -> int:
                       padding=Padding(args.pad_before, args.pad_after), seed=args.seed, workers=args.workers,
                       scheduler=args.scheduler, backend=args.backend, arch=args.arch,
                       progress=not args.no_progress, figures=not args.no_figures)
+    if getattr(args, "render", False):
+        from ..render import render_dataset
+
+        movies = render_dataset(run, folder, progress=not args.no_progress)
+        print(f"{len(movies)} field movies in {out}/movies/", file=sys.stderr)
     print(table2_markdown(run.summary["results"], run.models, run.conditions))
     print(f"{len(run.labels)} clips x {len(run.models)} models x {len(run.conditions)} conditions: "
           f"{run.ran} run now, {run.skipped} reused; results in {out}/ (results.csv, summary.md)")
@@ -107,6 +112,8 @@ def dataset_main(argv: Sequence[str]) -> int:
                     "figures. Rerunning with the same OUT skips finished work.")
     ap.add_argument("folder", metavar="DIR", help="folder of videos")
     ap.add_argument("--out", required=True, help="output folder")
+    ap.add_argument("--render", action="store_true",
+                    help="also write a field movie of each scored clip and model (OUT/movies/<clip>.<model>.mp4)")
     _add_dataset_options(ap, rain_default="none")
     args = ap.parse_args(list(argv))
     folder = Path(args.folder)

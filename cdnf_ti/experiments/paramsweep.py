@@ -35,7 +35,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..atomic import atomic_write_json, atomic_write_text
+from ..atomic import atomic_write_json
 from ..errors import InputError
 
 MAX_SETTINGS = 10_000
