@@ -169,7 +169,8 @@ def plot_clip(path: str | os.PathLike, label: "ClipLabel", traces: Mapping[tuple
             ax.text(0.5, 0.5, "no trace (error)", transform=ax.transAxes, ha="center", va="center")
         ax.set_ylabel(f"{m}\n{name}")
         ax.grid(alpha=0.3)
-        ax.legend(loc="upper left", fontsize=6, ncol=3, framealpha=0.8)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc="upper left", fontsize=6, ncol=3, framealpha=0.8)
     top = axes[0, 0].secondary_xaxis("top", functions=(lambda f: f / fps, lambda s: s * fps))
     top.set_xlabel("time (s)", fontsize=8)
     top.tick_params(labelsize=7)
