@@ -104,3 +104,13 @@ def test_a_console_error_is_caught(tmp_path):
                    "<script>console.error('broken')</script></body></html>")
     _dom, console = _load(bad, tmp_path)
     assert any("broken" in ln for ln in console)
+
+
+def test_markdown_tables_become_html_tables_without_the_rule_row():
+    from cdnf_ti.experiments.htmlreport import Page, add_markdown
+
+    page = Page("t")
+    add_markdown(page, "# T\n\n## Head\n\n- a `b`\n\n| x | y |\n|---|---|\n| 1 | 2 |\n| 3 | 4 |\n\ntext\n")
+    html = page.render()
+    assert html.count("<table") == 1 and html.count("<tr>") == 3 and "---" not in html
+    assert "<h2>Head</h2>" in html and "<li>a b</li>" in html and "<p>text</p>" in html

@@ -138,8 +138,9 @@ def add_markdown(page: Page, md: str) -> None:
             while i < len(lines) and lines[i].startswith("|"):
                 block.append(lines[i].strip())
                 i += 1
-            cells = [[c.strip().replace("`", "") for c in row.strip("|").split(" | ")] for row in block]
-            body = [r for r in cells[1:] if not all(set(c) <= set("-: ") for c in r)]
+            block = [row for row in block if not set(row) <= set("|-: ")]  # the |---|---| rule
+            cells = [[c.strip().replace("`", "") for c in row[1:-1].split(" | ")] for row in block]
+            body = cells[1:]
             page.table(cells[0], body)
             continue
         if ln.startswith("#"):
