@@ -449,8 +449,30 @@ def evaluate(out: Path, model: str, settings: Sequence[dict], conditions: Sequen
                                 score_clip(tr.first_alert, labs[c], 30.0, padding).outcome == "TP"),
                        false_alarms=sum(1 for c, tr in traces.items() if not labs[c].collision
                                         and tr.first_alert is not None))
+            # the same scores when only alerts strictly before contact count as hits
+            pre = {c: before_contact(lab) for c, lab in labs.items()}
+            own_pre = [score_clip(tr.first_alert, pre[c], 30.0, padding).outcome in ("TP", "TN")
+                       for c, tr in traces.items()]
+            row.update(accuracy_pre_contact=float(np.mean(own_pre)), auc_pre_contact=roc(fas, pre, levels, padding).auc,
+                       cv_accuracy_pre_contact=cross_validated_accuracy(fas, pre, levels, padding, folds=folds,
+                                                                        seed=seed, default=default).accuracy)
+            leads = [score_clip(tr.first_alert, labs[c], float(getattr(tr, "fps_in", 30.0)), padding)
+                     for c, tr in traces.items() if labs[c].collision]
+            hit_leads = [sc.lead_time_ms for sc in leads if sc.outcome == "TP" and sc.lead_time_ms is not None]
+            row.update(hits_before_contact=sum(1 for v in hit_leads if v > 0),
+                       median_hit_lead_ms=float(np.median([v for v in hit_leads if v > 0]))
+                       if any(v > 0 for v in hit_leads) else None)
             rows.append(row)
     return rows
+
+
+def before_contact(label):
+    """``label`` with its window cut to end one frame before contact (when the contact frame is known),
+    so that an alert at or after contact counts as late."""
+    if not label.collision or label.contact_frame is None:
+        return label
+    end = max(label.window_start, min(label.window_end, label.contact_frame - 1))
+    return dataclasses.replace(label, window_end=end)
 
 
 def alert_levels(spec, traces, setting: dict | None = None) -> list[float]:

@@ -15,8 +15,9 @@ if TYPE_CHECKING:  # pragma: no cover
     from .paramsweep import ParamSweepRun
 
 SCORE_COLUMNS = ("condition", "clips", "errors", "accuracy", "auc", "cv_accuracy", "cv_scheme",
-                 "best_in_sample_accuracy", "best_in_sample_level", "alert_parameter", "hits", "false_alarms",
-                 "max_output")
+                 "best_in_sample_accuracy", "best_in_sample_level", "alert_parameter", "hits", "hits_before_contact",
+                 "median_hit_lead_ms", "false_alarms", "max_output", "accuracy_pre_contact", "auc_pre_contact",
+                 "cv_accuracy_pre_contact")
 
 
 def _f(v, digits: int = 3) -> str:
@@ -25,14 +26,19 @@ def _f(v, digits: int = 3) -> str:
 
 def table_rows(run: "ParamSweepRun") -> tuple[list[str], list[list]]:
     names = [a.name for a in run.axes]
-    header = names + ["condition", "clips", "accuracy (own alert rule)", "AUC", "CV accuracy (held-out level)",
-                      "best accuracy (in-sample)", "at level (in-sample)"]
+    header = names + ["condition", "clips", "accuracy (own alert rule)", "hits (before contact)", "false alarms",
+                      "AUC", "CV accuracy (held-out level)", "best accuracy (in-sample)", "at level (in-sample)",
+                      "before-contact hits only: accuracy / AUC / CV accuracy"]
     rows = []
     for r in run.rows:
         rows.append([f"{r[n]:.4g}" if isinstance(r[n], float) else r[n] for n in names]
-                    + [r["condition"], r["clips"], pct(r.get("accuracy")), _f(r.get("auc")), pct(r.get("cv_accuracy")),
+                    + [r["condition"], r["clips"], pct(r.get("accuracy")),
+                       f"{r.get('hits', '')} ({r.get('hits_before_contact', '')})", r.get("false_alarms", ""),
+                       _f(r.get("auc")), pct(r.get("cv_accuracy")),
                        pct(r.get("best_in_sample_accuracy")),
-                       "" if r.get("best_in_sample_level") is None else f"{r['best_in_sample_level']:.4g}"])
+                       "" if r.get("best_in_sample_level") is None else f"{r['best_in_sample_level']:.4g}",
+                       f"{pct(r.get('accuracy_pre_contact'))} / {_f(r.get('auc_pre_contact'))} / "
+                       f"{pct(r.get('cv_accuracy_pre_contact'))}"])
     return header, rows
 
 
@@ -70,7 +76,13 @@ def plot_param_sweep(path: Path, run: "ParamSweepRun", metric: str = "cv_accurac
                 ax.set_yticks(range(len(a0.values)), [f"{v:g}" if not isinstance(v, str) else v for v in a0.values])
                 ax.set_xlabel(a1.name)
                 ax.set_ylabel(a0.name)
-                ax.set_title(title, fontsize=9)
+                ax.set_title(title + " (box: defaults)", fontsize=9)
+                dflt = _defaults(run.model)
+                if a0.name in dflt and a1.name in dflt:
+                    ii = [i for i, v in enumerate(a0.values) if _close(v, dflt[a0.name])]
+                    jj = [j for j, v in enumerate(a1.values) if _close(v, dflt[a1.name])]
+                    if ii and jj:
+                        ax.add_patch(plt.Rectangle((jj[0] - 0.5, ii[0] - 0.5), 1, 1, fill=False, ec="red", lw=2))
                 fig.colorbar(im, ax=ax, shrink=0.8)
         else:
             fig, axes = plt.subplots(1, max(1, len(names)), figsize=(4.4 * max(1, len(names)), 3.4), squeeze=False)
@@ -95,6 +107,24 @@ def plot_param_sweep(path: Path, run: "ParamSweepRun", metric: str = "cv_accurac
         fig.tight_layout()
         made.append(save_figure(fig, path.parent / f"{path.stem}_{cond}.png"))
     return made
+
+
+def _defaults(model: str) -> dict:
+    import dataclasses
+
+    from ..models import get_model_class
+
+    try:
+        return dataclasses.asdict(get_model_class(model).params_type())
+    except Exception:  # noqa: BLE001 - only for a marker
+        return {}
+
+
+def _close(a, b) -> bool:
+    try:
+        return abs(float(a) - float(b)) < 1e-4 * max(1.0, abs(float(b)))
+    except (TypeError, ValueError):
+        return a == b
 
 
 def run_baseline(run: "ParamSweepRun") -> float | None:
@@ -133,6 +163,9 @@ def write_param_sweep_reports(run: "ParamSweepRun", labels: Sequence, padding, f
         "other clips only (out-of-sample for the alert level; the parameter setting itself is still picked by "
         "looking at this table, so the best row of the table is optimistic).",
         f"- best accuracy / at level: {IN_SAMPLE_NOTE}.",
+        "- hits (before contact): true positives, and how many of them came strictly before the contact frame; "
+        "before-contact hits only: the same scores with each window cut to end one frame before contact, so an "
+        "alert at or after contact (which warns of nothing) counts as late.",
         f"- tasks run now: {run.ran}; reused from disk: {run.skipped}; failed: {len(run.errors)}",
     ]
     md = [f"# Parameter sweep: {run.model}", "", *intro, "", *markdown_table(header, rows), ""]
