@@ -362,8 +362,8 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
         key = setting_key(s)
         for cond in conditions:
             for lab in labels:
-                t = SweepTask(lab.clip, str(files[lab.clip]), name, tuple(s.items()), key, cond, str(out), seed,
-                              backend, arch, float(downscale))
+                t = SweepTask(lab.clip, str(Path(files[lab.clip]).resolve()), name, tuple(s.items()), key, cond,
+                              str(out), seed, backend, arch, float(downscale))
                 meta = load_meta(setting_folder(out, key), cond, lab.clip, name, task_fingerprint(t))
                 if meta is not None:
                     records[(key, cond, lab.clip)] = meta
