@@ -246,7 +246,8 @@ def plot_threshold_sweep(path: str | os.PathLike, rows: Sequence[Mapping], specs
         ax_c.set_xlabel(spec.parameter)
         ax_a.legend(fontsize=7)
         ax_c.legend(fontsize=7)
-    fig.suptitle("Threshold sweep (false alarm = alert on a non-collision clip or before the window)", fontsize=10)
+    fig.suptitle("Threshold sweep, IN-SAMPLE: scored on the same clips (false alarm = alert on a non-collision clip "
+                 "or before the window); see the CV accuracy for an out-of-sample figure", fontsize=10)
     fig.tight_layout()
     return save_figure(fig, path)
 
