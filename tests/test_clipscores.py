@@ -3,8 +3,13 @@ from __future__ import annotations
 
 import pytest
 
-from cdnf_ti.experiments.clipscores import (bootstrap_accuracy, cross_validated_accuracy, lead_times,
-                                            never_alerts_accuracy, roc)
+from cdnf_ti.experiments.clipscores import (
+    bootstrap_accuracy,
+    cross_validated_accuracy,
+    lead_times,
+    never_alerts_accuracy,
+    roc,
+)
 from cdnf_ti.experiments.labels import ClipLabel
 
 
