@@ -136,3 +136,12 @@ def test_sweep_reports_scores_per_setting_and_marks_in_sample(dataset, tmp_path)
     html = (tmp_path / "s" / "report.html").read_text()
     assert "data:image/png;base64," in html and "<table" in html and "in-sample" in html
     assert len(run.rows) == 2
+
+
+def test_progress_lines_name_the_clip_the_setting_and_the_condition():
+    from cdnf_ti.experiments.paramsweep import SweepTask, describe_task
+
+    t = SweepTask("c01", "/x/c01.mp4", "cdnf", (("h", 0.1),), "h=0.1", "clean", "/out")
+    assert describe_task(t) == "c01 [cdnf h=0.1, clean]"
+    assert describe_task(t, {"seconds": 12.34, "error": ""}) == "c01 [cdnf h=0.1, clean]: 12.3 s"
+    assert describe_task(t, {"error": "bad"}).endswith("error: bad")

@@ -214,6 +214,17 @@ class SweepTask:
     downscale: float = 1.0
 
 
+def describe_task(task: SweepTask, result: Any = None) -> str:
+    """Progress line of one task: ``c01 [cdnf h=0.1,alpha_off=0.7, clean]: 12.3 s``."""
+    line = f"{task.clip} [{task.model} {task.key}, {task.condition}]"
+    if isinstance(result, dict):
+        if result.get("error"):
+            return f"{line}: error: {result['error']}"
+        if result.get("seconds") is not None:
+            return f"{line}: {result['seconds']:.1f} s"
+    return line
+
+
 def setting_folder(out: str | os.PathLike, key: str) -> Path:
     return Path(out) / "settings" / key
 
@@ -372,8 +383,13 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
                     tasks.append(t)
     ran = 0
     errors = []
+    import inspect
+
+    extra = {}
+    if "describe" in inspect.signature(map_tasks).parameters:  # progress lines naming the setting
+        extra["describe"] = describe_task
     for i, res in map_tasks(run_sweep_task, tasks, workers=workers, scheduler=scheduler, arch=arch,
-                            progress=f"sweep {name}" if progress else False):
+                            progress=f"sweep {name}" if progress else False, **extra):
         t = tasks[i]
         if isinstance(res, TaskFailed):
             res = dict(clip=t.clip, model=name, condition=t.condition, key=t.key, error=f"{t.path}: {res}")
