@@ -127,6 +127,13 @@ def plot_clip(path: str | os.PathLike, label: "ClipLabel", traces: Mapping[tuple
             if n_ts is not None:
                 ax.axhline(n_ts, color="k", ls="--", lw=0.9, label=f"n_ts = {n_ts:g} (alert)")
                 hi = max(hi, n_ts)
+            for c in conditions:  # frames held at rest by feed-forward inhibition (LGMD1, F-LGMD ONn)
+                tr = traces.get((m, c))
+                held = None if tr is None else tr.diagnostics.get("held")
+                if held is not None and np.nansum(held) > 0:
+                    ax.fill_between(np.arange(tr.n_frames), -0.5, hi * 1.15 + 0.5, where=held > 0, step="mid",
+                                    color=COND_STYLE.get(c, {}).get("color", "0.5"), alpha=0.15, lw=0,
+                                    label=f"held at rest ({c}): {100 * np.nanmean(held > 0):.0f}% of frames")
             ax.set_ylim(-0.5, hi * 1.15 + 0.5)
             ax.set_ylabel(f"{m}\nspike count")
             ax.legend(loc="upper left", fontsize=6, framealpha=0.8)
@@ -308,7 +315,7 @@ def dataset_figures(run: "DatasetRun", traces: Mapping, specs: Mapping, progress
         inputs = [trace_path(run.out, c, lab.clip, m) for (m, c) in tr]
         stamp = figdir / f".traces_{lab.clip}.key"
         key = (f"{sorted(tr)} pad={pad_tag} window={lab.window_start}-{lab.window_end} contact={lab.contact_frame} "
-               f"label={lab.label} fig=2")
+               f"label={lab.label} fig=3")
         if _up_to_date(png, inputs) and stamp.is_file() and stamp.read_text() == key:
             made.append(png)
             continue
