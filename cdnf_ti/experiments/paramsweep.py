@@ -431,6 +431,7 @@ def evaluate(out: Path, model: str, settings: Sequence[dict], conditions: Sequen
         sf = setting_folder(out, key)
         for cond in conditions:
             traces = {}
+            fps_of: dict[str, float] = {}
             n_err = 0
             for lab in labels:
                 p = trace_path(sf, cond, lab.clip, model)
@@ -439,6 +440,10 @@ def evaluate(out: Path, model: str, settings: Sequence[dict], conditions: Sequen
                     n_err += 1
                     continue
                 traces[lab.clip] = Trace.from_csv(p, model=model)
+                try:
+                    fps_of[lab.clip] = float(json.loads(jp.read_text(encoding="utf-8")).get("fps") or 30.0)
+                except (OSError, ValueError):
+                    fps_of[lab.clip] = 30.0
             row: dict[str, Any] = dict(s)
             row.update(setting=key, condition=cond, clips=len(traces), errors=n_err)
             if not traces:
@@ -472,7 +477,7 @@ def evaluate(out: Path, model: str, settings: Sequence[dict], conditions: Sequen
             row.update(accuracy_pre_contact=float(np.mean(own_pre)), auc_pre_contact=roc(fas, pre, levels, padding).auc,
                        cv_accuracy_pre_contact=cross_validated_accuracy(fas, pre, levels, padding, folds=folds,
                                                                         seed=seed, default=default).accuracy)
-            leads = [score_clip(tr.first_alert, labs[c], float(getattr(tr, "fps_in", 30.0)), padding)
+            leads = [score_clip(tr.first_alert, labs[c], fps_of.get(c, 30.0), padding)
                      for c, tr in traces.items() if labs[c].collision]
             hit_leads = [sc.lead_time_ms for sc in leads if sc.outcome == "TP" and sc.lead_time_ms is not None]
             row.update(hits_before_contact=sum(1 for v in hit_leads if v > 0),
