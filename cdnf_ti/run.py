@@ -38,6 +38,7 @@ SUBCOMMANDS: dict[str, str] = {
     "rain": "cdnf_ti.generate:rain_main",
     "dataset": "cdnf_ti.experiments.cli:dataset_main",
     "experiment": "cdnf_ti.experiments.cli:experiment_main",
+    "render": "cdnf_ti.render:render_main",
 }
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..atomic import atomic_write, atomic_write_json
 from ..errors import InputError, OutputError, output_error
+from ..video import open_writer
 
 FORMATS = ("avi", "png")
 
@@ -94,11 +95,12 @@ def write_frames(frames: Iterable[np.ndarray], path: str | os.PathLike, fps: flo
                     for f in frames:
                         g = to_uint8(f)
                         if writer is None:
-                            writer = cv2.VideoWriter(tmp, cv2.VideoWriter_fourcc(*"FFV1"), float(fps),
-                                                     (g.shape[1], g.shape[0]), isColor=False)
-                            if not writer.isOpened():
+                            try:  # the one writer of cdnf_ti (cdnf_ti/video.py)
+                                writer = open_writer(tmp, fps, (g.shape[1], g.shape[0]), "FFV1", is_color=False,
+                                                     name=path)
+                            except InputError:
                                 raise InputError(path, "cannot open an FFV1 AVI writer (OpenCV without FFV1?); "
-                                                       "give a folder name for PNG frames instead")
+                                                       "give a folder name for PNG frames instead") from None
                             shape = g.shape
                         if g.shape != shape:
                             raise ValueError(f"{path}: frame {count} has shape {g.shape}, expected {shape}")

@@ -117,3 +117,32 @@ def test_find_clip_prefers_exact_name_then_known_extensions(tmp_path):
     assert find_clip(tmp_path, "x").name == "x.avi"
     assert find_clip(tmp_path, "x.avi").name == "x.avi"
     assert find_clip(tmp_path, "y") is None
+
+
+def test_every_bad_row_is_listed_each_with_a_hint_in_one_line(tmp_path):
+    p = _write(tmp_path, "clip,label,window_start,window_end,contact_frame\n"
+                         "a,colision,1,2,\n"          # row 2: bad label
+                         "b,collision,9,3,\n"         # row 3: window reversed
+                         "c,collision,1,2,\n"         # row 4: fine
+                         "d,non-collision,4,5,\n"     # row 5: window on a non-collision clip
+                         "e,collision,x,2.5,\n")      # row 6: two bad frame numbers
+    with pytest.raises(InputError) as e:
+        read_labels(p)
+    msg = str(e.value)
+    assert "\n" not in msg and "4 bad rows" in msg
+    for row in ("row 2 (a)", "row 3 (b)", "row 5 (d)", "row 6 (e)"):
+        assert row in msg
+    assert "row 4" not in msg
+    assert "window_start 'x'" in msg and "window_end '2.5'" in msg
+    assert msg.count("(hint: ") == 5
+
+
+def test_every_missing_clip_and_window_past_the_end_is_listed(tmp_path):
+    _video(tmp_path, "a", n=12)
+    p = _write(tmp_path, "clip,label,window_start,window_end\na,collision,5,20\nb,non-collision,,\n"
+                         "c,non-collision,,\n")
+    with pytest.raises(InputError) as e:
+        validate_dataset(read_labels(p), tmp_path, p)
+    msg = str(e.value)
+    assert "3 bad rows" in msg and "window_end 20 is outside the video" in msg
+    assert "clip 'b' has no video" in msg and "clip 'c' has no video" in msg and "hint:" in msg

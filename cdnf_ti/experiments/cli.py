@@ -71,6 +71,11 @@ def _dataset(args, folder: Path, out: Path) -> int:
                       padding=Padding(args.pad_before, args.pad_after), seed=args.seed, workers=args.workers,
                       scheduler=args.scheduler, backend=args.backend, arch=args.arch,
                       progress=not args.no_progress, figures=not args.no_figures)
+    if getattr(args, "render", False):
+        from ..render import render_dataset
+
+        movies = render_dataset(run, folder, progress=not args.no_progress)
+        print(f"{len(movies)} field movies in {out}/movies/", file=sys.stderr)
     print(table2_markdown(run.summary["results"], run.models, run.conditions))
     for line in headline(run):
         print(line)
@@ -105,6 +110,32 @@ def headline(run) -> list[str]:
     return lines
 
 
+def _param_sweep(args) -> int:
+    from ..run import parse_models
+    from .paramsweep import run_param_sweep
+    from .scoring import Padding
+
+    models = parse_models(args.models)
+    if len(models) != 1:
+        raise UserError("experiment sweep takes exactly one --model (its parameters are swept)")
+    if not args.param:
+        raise UserError("experiment sweep needs at least one --param NAME=SPEC")
+    folder = Path(args.folder)
+    if not folder.is_dir():
+        raise InputError(folder, "dataset folder not found")
+    run = run_param_sweep(folder, args.labels, Path(args.out), models[0], args.param, rain=args.rain,
+                          padding=Padding(args.pad_before, args.pad_after), seed=args.seed, folds=args.folds,
+                          workers=args.workers, scheduler=args.scheduler, backend=args.backend, arch=args.arch,
+                          progress=not args.no_progress, figures=not args.no_figures, downscale=args.downscale,
+                          html=not args.no_html)
+    print((Path(args.out) / "param_sweep.md").read_text(encoding="utf-8"))
+    print(f"{len(run.settings)} settings x {len(run.conditions)} conditions: {run.ran} tasks run now, "
+          f"{run.skipped} reused; results in {args.out}/", file=sys.stderr)
+    for e in run.errors:
+        print(f"error: {e.get('error')} [{e.get('key')}, {e.get('condition')}]", file=sys.stderr)
+    return EXIT_FAILED if run.errors else EXIT_OK
+
+
 def dataset_main(argv: Sequence[str]) -> int:
     """``python -m cdnf_ti.run dataset DIR --labels CSV --out OUT [...]``."""
     ap = argparse.ArgumentParser(
@@ -114,6 +145,8 @@ def dataset_main(argv: Sequence[str]) -> int:
                     "figures. Rerunning with the same OUT skips finished work.")
     ap.add_argument("folder", metavar="DIR", help="folder of videos")
     ap.add_argument("--out", required=True, help="output folder")
+    ap.add_argument("--render", action="store_true",
+                    help="also write a field movie of each scored clip and model (OUT/movies/<clip>.<model>.mp4)")
     _add_dataset_options(ap, rain_default="none")
     args = ap.parse_args(list(argv))
     folder = Path(args.folder)
@@ -131,7 +164,7 @@ def experiment_main(argv: Sequence[str]) -> int:
 
     ap = argparse.ArgumentParser(prog="python -m cdnf_ti.run experiment",
                                  description="Regenerate the paper's experiments.")
-    sub = ap.add_subparsers(dest="which", required=True, metavar="{table1,coherence,table2}")
+    sub = ap.add_subparsers(dest="which", required=True, metavar="{table1,coherence,table2,sweep}")
     p1 = sub.add_parser("table1", help="basic selectivity on the six basic stimuli (Table I, Fig. 2)")
     p2 = sub.add_parser("coherence", help="coherence sweep on the six incoherent stimuli (Fig. 4)")
     for p, name in ((p1, "table1"), (p2, "coherence")):
@@ -151,8 +184,23 @@ def experiment_main(argv: Sequence[str]) -> int:
                     help="folder of videos with labels.csv (default: ../shared/data/real next to the repository)")
     p3.add_argument("--out", default="cdnf_experiments/table2", help="output folder (default: %(default)s)")
     _add_dataset_options(p3, rain_default="both")
+    p4 = sub.add_parser("sweep", help="a grid of one model's parameters over a labelled folder: accuracy, "
+                                      "ROC AUC and cross-validated accuracy per setting")
+    p4.add_argument("folder", metavar="DIR", help="folder of videos with labels.csv")
+    p4.add_argument("--out", default="cdnf_experiments/sweep", help="output folder (default: %(default)s)")
+    p4.add_argument("--param", action="append", default=[], metavar="NAME=SPEC",
+                    help="a parameter of the model and its values: NAME=START:STOP:N (N values, ends included), "
+                         "NAME=V1,V2,... or NAME=V; repeat for a grid")
+    p4.add_argument("--folds", type=_nonneg_int, default=0,
+                    help="cross-validation folds for the alert level (default 0: leave-one-out)")
+    p4.add_argument("--downscale", type=float, default=1.0,
+                    help="resize every frame by this factor in (0, 1] (default 1: native size)")
+    p4.add_argument("--no-html", action="store_true", help="do not write report.html")
+    _add_dataset_options(p4, rain_default="none")
     args = ap.parse_args(list(argv))
 
+    if args.which == "sweep":
+        return _param_sweep(args)
     if args.which == "table2":
         folder = Path(args.folder) if args.folder else builtin.default_real_folder()
         if folder is None:

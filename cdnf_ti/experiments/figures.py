@@ -60,10 +60,27 @@ def _alert_rug(ax, trace: "Trace", t: np.ndarray, y: float, **style) -> None:
                 markeredgecolor="k", zorder=5)
 
 
+def _count_threshold(model: str) -> float | None:
+    """The spike-count threshold ``n_ts`` of an LGMD-family model (None for others)."""
+    try:
+        from ..models import get_model_class
+
+        cls = get_model_class(model)
+        return float(cls.params_type().n_ts) if hasattr(cls.params_type(), "n_ts") else None
+    except Exception:  # noqa: BLE001 - a model we do not know: no count panel
+        return None
+
+
 def plot_clip(path: str | os.PathLike, label: "ClipLabel", traces: Mapping[tuple[str, str], "Trace"],
               models: Sequence[str], conditions: Sequence[str], fps: float = 30.0,
               padding: "Padding | None" = None) -> Path:
-    """Fig. 5 style: each model's output over time for one clip, clean and rainy.
+    """Fig. 5 style: each model's output over frames for one clip, clean and rainy.
+
+    The x axis is frames (seconds on the top axis). The pink window is the
+    labelled collision window of ``label`` (the labels file in use). Models
+    with a spike count (LGMD family) get a second panel with the count and its
+    threshold ``n_ts``; SDNF's moving threshold (``dyn_threshold``) is drawn as
+    a line over frames.
 
     Parameters
     ----------
@@ -73,22 +90,58 @@ def plot_clip(path: str | os.PathLike, label: "ClipLabel", traces: Mapping[tuple
     traces : mapping of (model, condition) -> Trace
     models, conditions : sequence of str
     fps : float
-        Frame rate (frames/s), for the time axis.
+        Frame rate (frames/s), for the seconds axis.
     padding : Padding, optional
         Shows the padded window (lighter) around the labelled one.
     """
     plt = _plt()
-    fig, axes = plt.subplots(len(models), 1, figsize=(8, 1.9 * len(models) + 0.6), sharex=True, squeeze=False)
-    for ax, m in zip(axes[:, 0], models):
+    panels: list[tuple[str, str]] = []
+    for m in models:
+        panels.append((m, "output"))
+        if any("count" in tr.diagnostics for (mm, _c), tr in traces.items() if mm == m):
+            panels.append((m, "count"))
+    ratios = [1.0 if kind == "output" else 0.7 for _m, kind in panels]
+    fig, axes = plt.subplots(len(panels), 1, figsize=(8, 1.7 * sum(ratios) + 0.9), sharex=True, squeeze=False,
+                             height_ratios=ratios)
+    for k_ax, (ax, (m, kind)) in enumerate(zip(axes[:, 0], panels)):
+        first = k_ax == 0  # the window / contact legend only once
         if label.collision:
             if padding is not None and (padding.before or padding.after):
                 lo = max(0, label.window_start - padding.before)
-                ax.axvspan(lo / fps, (label.window_end + padding.after + 1) / fps, color=WINDOW_COLOUR, alpha=0.3,
-                           lw=0, label="padded window")
-            ax.axvspan(label.window_start / fps, (label.window_end + 1) / fps, color=WINDOW_COLOUR, alpha=0.7, lw=0,
-                       label="collision window")
+                ax.axvspan(lo - 0.5, label.window_end + padding.after + 0.5, color=WINDOW_COLOUR, alpha=0.3,
+                           lw=0, label="padded window" if first else None)
+            ax.axvspan(label.window_start - 0.5, label.window_end + 0.5, color=WINDOW_COLOUR, alpha=0.7, lw=0,
+                       label=f"collision window {label.window_start}-{label.window_end}" if first else None)
         if label.contact_frame is not None:
-            ax.axvline(label.contact_frame / fps, color="k", lw=0.8, ls=":", label="contact")
+            ax.axvline(label.contact_frame, color="k", lw=0.8, ls=":",
+                       label=f"contact {label.contact_frame}" if first else None)
+        if kind == "count":
+            n_ts = _count_threshold(m)
+            hi = 1.0
+            for c in conditions:
+                tr = traces.get((m, c))
+                if tr is None or "count" not in tr.diagnostics:
+                    continue
+                cnt = tr.diagnostics["count"]
+                st = dict(COND_STYLE.get(c, dict(label=c)))
+                st.pop("label", None)
+                ax.step(np.arange(tr.n_frames), cnt, where="mid", lw=1.1, **st)
+                hi = max(hi, float(np.nanmax(cnt)))
+            if n_ts is not None:
+                ax.axhline(n_ts, color="k", ls="--", lw=0.9, label=f"n_ts = {n_ts:g} (alert)")
+                hi = max(hi, n_ts)
+            for c in conditions:  # frames held at rest by feed-forward inhibition (LGMD1, F-LGMD ONn)
+                tr = traces.get((m, c))
+                held = None if tr is None else tr.diagnostics.get("held")
+                if held is not None and np.nansum(held) > 0:
+                    ax.fill_between(np.arange(tr.n_frames), -0.5, hi * 1.15 + 0.5, where=held > 0, step="mid",
+                                    color=COND_STYLE.get(c, {}).get("color", "0.5"), alpha=0.15, lw=0,
+                                    label=f"held at rest ({c}): {100 * np.nanmean(held > 0):.0f}% of frames")
+            ax.set_ylim(-0.5, hi * 1.15 + 0.5)
+            ax.set_ylabel(f"{m}\nspike count")
+            ax.legend(loc="upper left", fontsize=6, framealpha=0.8)
+            ax.grid(alpha=0.3)
+            continue
         thr = None
         lo_y, hi_y = np.inf, -np.inf
         name = "output"
@@ -96,10 +149,19 @@ def plot_clip(path: str | os.PathLike, label: "ClipLabel", traces: Mapping[tuple
             tr = traces.get((m, c))
             if tr is None:
                 continue
-            t = np.arange(tr.n_frames) / fps
-            ax.plot(t, tr.output, lw=1.2, **COND_STYLE.get(c, dict(label=c)))
+            t = np.arange(tr.n_frames)
+            st = dict(COND_STYLE.get(c, dict(label=c)))
+            if not first:
+                st.pop("label", None)
+            ax.plot(t, tr.output, lw=1.2, **st)
             lo_y, hi_y = min(lo_y, float(np.nanmin(tr.output))), max(hi_y, float(np.nanmax(tr.output)))
-            thr = tr.threshold if tr.threshold is not None else thr
+            dyn = tr.diagnostics.get("dyn_threshold")
+            if dyn is not None:
+                ax.plot(t, dyn, ls="--", lw=0.8, color=st.get("color", "k"), alpha=0.8,
+                        label=f"moving threshold ({c})")
+                lo_y, hi_y = min(lo_y, float(np.nanmin(dyn))), max(hi_y, float(np.nanmax(dyn)))
+            elif tr.threshold is not None:
+                thr = tr.threshold
             name = tr.output_name
         if thr is not None:
             ax.axhline(thr, color="k", ls="--", lw=0.9, label=f"threshold {thr:.4g}")
@@ -110,17 +172,56 @@ def plot_clip(path: str | os.PathLike, label: "ClipLabel", traces: Mapping[tuple
             for c in conditions:
                 tr = traces.get((m, c))
                 if tr is not None:
-                    _alert_rug(ax, tr, np.arange(tr.n_frames) / fps, rug_y, **COND_STYLE.get(c, {}))
+                    _alert_rug(ax, tr, np.arange(tr.n_frames), rug_y, **COND_STYLE.get(c, {}))
                     rug_y -= 0.08 * span
             ax.set_ylim(rug_y - 0.04 * span, hi_y + 0.1 * span)
         else:
             ax.text(0.5, 0.5, "no trace (error)", transform=ax.transAxes, ha="center", va="center")
         ax.set_ylabel(f"{m}\n{name}")
         ax.grid(alpha=0.3)
-    axes[0, 0].legend(loc="upper left", fontsize=7, ncol=3, framealpha=0.8)
-    axes[-1, 0].set_xlabel("time (s)   [ticks: alert frames; triangle: first alert]")
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc="upper left", fontsize=6, ncol=3, framealpha=0.8)
+    top = axes[0, 0].secondary_xaxis("top", functions=(lambda f: f / fps, lambda s: s * fps))
+    top.set_xlabel("time (s)", fontsize=8)
+    top.tick_params(labelsize=7)
+    axes[-1, 0].set_xlabel("frame   [ticks: alert frames; triangle: first alert]")
     kind = "collision" if label.collision else label.label
-    fig.suptitle(f"{label.clip} ({kind})", fontsize=11)
+    fig.suptitle(f"{label.clip} ({kind}, {fps:g} fps)", fontsize=11)
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def plot_roc(path: str | os.PathLike, scores: Mapping[str, Mapping[str, Mapping]]) -> Path:
+    """Clip-level ROC per model and condition (hit rate vs false-alarm rate over the alert level)."""
+    plt = _plt()
+    conds = list(dict.fromkeys(c for m in scores.values() for c in m))
+    fig, axes = plt.subplots(1, max(1, len(conds)), figsize=(4.3 * max(1, len(conds)), 4.0), squeeze=False)
+    for ax, c in zip(axes[0], conds):
+        for k, (m, per) in enumerate(scores.items()):
+            d = per.get(c)
+            if not d:
+                continue
+            r = d["roc"]
+            from .clipscores import roc_envelope
+
+            xs, ys = roc_envelope(r["hit_rate"], r["false_alarm_rate"])
+            auc = d.get("auc")
+            colour = MODEL_COLOURS[k % len(MODEL_COLOURS)]
+            jitter = (k - len(scores) / 2) * 0.008  # keep overlapping curves apart
+            ax.plot(np.array(xs) + jitter, np.array(ys) + jitter, "-", lw=1.4, color=colour,
+                    label=f"{m} (AUC {'n/a' if auc is None else f'{auc:.2f}'})")
+            ax.plot(np.array(r["false_alarm_rate"]) + jitter, np.array(r["hit_rate"]) + jitter, "o", ms=3,
+                    color=colour, alpha=0.6)
+        ax.plot([0, 1], [0, 1], color="0.6", ls=":", lw=0.8)
+        n_c = next((per[c]["roc"]["n_collision"] for per in scores.values() if c in per), 0)
+        n_n = next((per[c]["roc"]["n_non_collision"] for per in scores.values() if c in per), 0)
+        ax.set_xlabel(f"false-alarm rate ({n_n} non-collision clips)")
+        ax.set_ylabel(f"hit rate ({n_c} collision clips; first alert in window)")
+        ax.set_xlim(-0.05, 1.05)
+        ax.set_ylim(-0.05, 1.05)
+        ax.set_title(f"clip-level ROC, {c}", fontsize=10)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
     return save_figure(fig, path)
 
@@ -155,7 +256,8 @@ def plot_threshold_sweep(path: str | os.PathLike, rows: Sequence[Mapping], specs
         ax_c.set_xlabel(spec.parameter)
         ax_a.legend(fontsize=7)
         ax_c.legend(fontsize=7)
-    fig.suptitle("Threshold sweep (false alarm = alert on a non-collision clip or before the window)", fontsize=10)
+    fig.suptitle("Threshold sweep, IN-SAMPLE: scored on the same clips (false alarm = alert on a non-collision clip "
+                 "or before the window); see the CV accuracy for an out-of-sample figure", fontsize=10)
     fig.tight_layout()
     return save_figure(fig, path)
 
@@ -215,7 +317,8 @@ def dataset_figures(run: "DatasetRun", traces: Mapping, specs: Mapping, progress
         png = figdir / f"traces_{lab.clip}.png"
         inputs = [trace_path(run.out, c, lab.clip, m) for (m, c) in tr]
         stamp = figdir / f".traces_{lab.clip}.key"
-        key = f"{sorted(tr)} pad={pad_tag}"
+        key = (f"{sorted(tr)} pad={pad_tag} window={lab.window_start}-{lab.window_end} contact={lab.contact_frame} "
+               f"label={lab.label} fig=3")
         if _up_to_date(png, inputs) and stamp.is_file() and stamp.read_text() == key:
             made.append(png)
             continue
@@ -225,6 +328,8 @@ def dataset_figures(run: "DatasetRun", traces: Mapping, specs: Mapping, progress
         atomic_write_text(stamp, key)
     if run.sweep:
         made.append(plot_threshold_sweep(figdir / "threshold_sweep.png", run.sweep, specs))
+    if run.summary and run.summary.get("scores"):
+        made.append(plot_roc(figdir / "roc.png", run.summary["scores"]))
     if run.summary:
         made.append(plot_accuracy(figdir / "accuracy.png", run.summary["results"], run.models, run.conditions))
     return made

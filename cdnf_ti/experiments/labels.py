@@ -56,19 +56,47 @@ class ClipLabel:
         return asdict(self)
 
 
-def _int_field(path: str, line: int, name: str, text: str) -> int | None:
+class _RowError(Exception):
+    """One bad row (collected; all of them are reported together)."""
+
+
+#: How to fix each kind of problem (appended to the message).
+HINTS = {
+    "frame": "frames are 0-based whole numbers as read by cv2.VideoCapture",
+    "label": "write collision, non-collision or near-miss",
+    "window": "a collision clip needs window_start <= window_end (frames, inclusive)",
+    "empty-window": "leave window_start and window_end empty for a non-collision clip, or label it collision",
+    "clip": "give the video's file name without its extension",
+    "duplicate": "keep one row per clip (delete or merge the other)",
+    "missing": "put the video in the dataset folder or fix the clip name",
+    "outside": "frames are 0-based: the last frame of an N-frame video is N-1",
+}
+
+
+def _bad(line: int, clip: str, problem: str, hint: str) -> _RowError:
+    where = f"row {line}" + (f" ({clip})" if clip else "")
+    return _RowError(f"{where}: {problem} (hint: {HINTS[hint]})")
+
+
+def _int_field(path: str, line: int, name: str, text: str, clip: str = "") -> int | None:
     text = text.strip()
     if text == "":
         return None
     try:
         val = float(text)
     except ValueError:
-        raise InputError(path, f"row {line}: {name} {text!r} is not a frame number") from None
+        raise _bad(line, clip, f"{name} {text!r} is not a frame number", "frame") from None
     if not val.is_integer():
-        raise InputError(path, f"row {line}: {name} {text!r} is not a whole frame number")
+        raise _bad(line, clip, f"{name} {text!r} is not a whole frame number", "frame")
     if val < 0:
-        raise InputError(path, f"row {line}: {name} {text!r} is negative")
+        raise _bad(line, clip, f"{name} {text!r} is negative", "frame")
     return int(val)
+
+
+def _reject(path: str, problems: list[str]) -> InputError:
+    """One InputError listing every bad row (one line; rows separated by ' | ')."""
+    head = f"{len(problems)} bad row{'s' if len(problems) > 1 else ''}: " if len(problems) > 1 else ""
+    return InputError(path, head + " | ".join(problems))
 
 
 def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
@@ -111,34 +139,47 @@ def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
     col = {name: header.index(name) for name in header if name}
     labels: list[ClipLabel] = []
     seen: dict[str, int] = {}
+    problems: list[str] = []
     for line, r in enumerate(rows[1:], start=2):
         def get(name: str) -> str:
             i = col.get(name)
             return r[i] if i is not None and i < len(r) else ""
 
         clip = get("clip").strip()
-        if not clip:
-            raise InputError(path, f"row {line}: empty clip name")
-        if clip in seen:
-            raise InputError(path, f"row {line}: clip {clip!r} is already labelled in row {seen[clip]}")
-        seen[clip] = line
-        lab = get("label").strip()
-        key = lab.lower()
-        if key not in LABEL_VALUES:
-            raise InputError(path, f"row {line} ({clip}): label {lab!r} is not collision, non-collision "
-                                   "or near-miss")
-        collision = LABEL_VALUES[key]
-        ws = _int_field(path, line, "window_start", get("window_start"))
-        we = _int_field(path, line, "window_end", get("window_end"))
-        cf = _int_field(path, line, "contact_frame", get("contact_frame"))
-        if collision:
-            if ws is None or we is None:
-                raise InputError(path, f"row {line} ({clip}): a collision clip needs window_start and window_end")
-            if ws > we:
-                raise InputError(path, f"row {line} ({clip}): window_start {ws} > window_end {we}")
-        elif ws is not None or we is not None:
-            raise InputError(path, f"row {line} ({clip}): a {lab} clip must have an empty window")
+        try:
+            if not clip:
+                raise _bad(line, "", "empty clip name", "clip")
+            if clip in seen:
+                raise _bad(line, "", f"clip {clip!r} is already labelled in row {seen[clip]}", "duplicate")
+            seen[clip] = line
+            lab = get("label").strip()
+            key = lab.lower()
+            if key not in LABEL_VALUES:
+                raise _bad(line, clip, f"label {lab!r} is not collision, non-collision or near-miss", "label")
+            collision = LABEL_VALUES[key]
+            errs = []
+            vals = {}
+            for name in ("window_start", "window_end", "contact_frame"):
+                try:
+                    vals[name] = _int_field(path, line, name, get(name), clip)
+                except _RowError as e:
+                    errs.append(str(e))
+            if errs:
+                raise _RowError("; ".join(errs))
+            ws, we, cf = vals["window_start"], vals["window_end"], vals["contact_frame"]
+            if collision:
+                if ws is None or we is None:
+                    raise _bad(line, clip, "a collision clip needs window_start and window_end", "window")
+                if ws > we:
+                    raise _bad(line, clip, f"window_start {ws} > window_end {we}", "window")
+            elif ws is not None or we is not None:
+                raise _bad(line, clip, f"a {lab} clip must have an empty window", "empty-window")
+        except _RowError as e:
+            problems.append(str(e))
+            continue
         labels.append(ClipLabel(clip, lab, collision, ws, we, cf, line))
+    if problems:
+        raise _reject(path, problems)
     if not labels:
         raise InputError(path, "labels file has a header but no rows")
     return labels
@@ -214,10 +255,12 @@ def validate_dataset(labels: Iterable[ClipLabel], folder: str | os.PathLike,
         raise InputError(folder, "dataset folder not found")
     lp = str(labels_path)
     files: dict[str, Path] = {}
+    problems: list[str] = []
     for lab in labels:
         f = find_clip(folder, lab.clip)
         if f is None:
-            raise InputError(lp, f"row {lab.row}: clip {lab.clip!r} has no video in {folder}")
+            problems.append(str(_bad(lab.row, "", f"clip {lab.clip!r} has no video in {folder}", "missing")))
+            continue
         files[lab.clip] = f
         n = frame_count(f)
         if n is None:
@@ -225,8 +268,10 @@ def validate_dataset(labels: Iterable[ClipLabel], folder: str | os.PathLike,
         for name, val in (("window_start", lab.window_start), ("window_end", lab.window_end),
                           ("contact_frame", lab.contact_frame)):
             if val is not None and val >= n:
-                raise InputError(lp, f"row {lab.row} ({lab.clip}): {name} {val} is outside the video "
-                                     f"(frames 0..{n - 1})")
+                problems.append(str(_bad(lab.row, lab.clip, f"{name} {val} is outside the video "
+                                                            f"(frames 0..{n - 1})", "outside")))
+    if problems:
+        raise _reject(lp, problems)
     return files
 
 

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any, Iterable, Mapping, Sequence
 
 from ..atomic import atomic_write_json, atomic_write_text
 from ..paper import TABLE2
+from .clipscores import IN_SAMPLE_NOTE, never_alerts_accuracy, pct_ci
 from .scoring import tally
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -81,7 +82,68 @@ def threshold_sweep(run: "DatasetRun", traces: Mapping) -> tuple[list[dict], dic
     return sweep_dataset(specs, traces, labels, fps, run.padding), specs
 
 
-def summary_dict(run: "DatasetRun", specs: Mapping, dataset: str, labels_path: str, seed: int) -> dict:
+def honest_scores(run: "DatasetRun", traces: Mapping, specs: Mapping, seed: int = 0, folds: int = 0,
+                  n_boot: int = 2000) -> dict:
+    """Threshold-free and out-of-sample scores per model and condition.
+
+    Returns
+    -------
+    dict
+        ``{model: {condition: {...}}}`` with ``accuracy_ci`` (seeded bootstrap
+        95% interval at the model's own threshold), ``roc`` (clip-level ROC over
+        the alert level) and ``auc``, ``cv`` (accuracy with each fold's alert level
+        chosen on the other folds), ``in_sample_best`` (best level and accuracy,
+        chosen on the scored clips: in-sample), ``lead_times`` and ``held``
+        (share of frames a model was held at rest, for models with such a state).
+    """
+    import dataclasses
+
+    import numpy as np
+
+    from .clipscores import (IN_SAMPLE_NOTE, bootstrap_accuracy, choose_level, correctness_matrix,
+                             cross_validated_accuracy, lead_times, roc)
+    from .paramsweep import alert_levels
+    from .sweep import sweep_first_alerts
+
+    labels = {lab.clip: lab for lab in run.labels}
+    out: dict = {}
+    for m in run.models:
+        for c in run.conditions:
+            rows = [r for r in run.rows if r["model"] == m and r["condition"] == c and not r.get("error")]
+            if not rows:
+                continue
+            tr = {r["clip"]: traces[(r["clip"], m, c)] for r in rows if (r["clip"], m, c) in traces}
+            d: dict[str, Any] = {}
+            correct = [r["outcome"] in ("TP", "TN") for r in rows]
+            d["accuracy_ci"] = bootstrap_accuracy(correct, n_boot=n_boot, seed=seed).to_dict()
+            spec = specs[m]
+            levels = alert_levels(spec, list(tr.values()))
+            spec_l = dataclasses.replace(spec, values=tuple(levels))
+            fas = {clip: sweep_first_alerts(spec_l, t) for clip, t in tr.items()}
+            r_ = roc(fas, labels, levels, run.padding)
+            d["roc"] = r_.to_dict()
+            d["auc"] = r_.auc
+            d["alert_parameter"] = spec.parameter
+            cv = cross_validated_accuracy(fas, labels, levels, run.padding, folds=folds, seed=seed,
+                                          default=spec.default)
+            d["cv"] = cv.to_dict()
+            _, cm = correctness_matrix(fas, labels, run.padding)
+            jb = choose_level(cm, levels, spec.default)
+            d["in_sample_best"] = {"level": levels[jb], "accuracy": float(cm[:, jb].mean()),
+                                   "note": IN_SAMPLE_NOTE}
+            d["lead_times"] = lead_times(rows).to_dict()
+            held = [t.diagnostics["held"] for t in tr.values() if "held" in t.diagnostics]
+            if held:
+                h = np.concatenate(held)
+                d["held"] = {"frames": int(h.size), "held_frames": int((h > 0).sum()),
+                             "share": float((h > 0).mean()) if h.size else None,
+                             "what": "held at rest by feed-forward inhibition (FFI >= T_ffi)"}
+            out.setdefault(m, {})[c] = d
+    return out
+
+
+def summary_dict(run: "DatasetRun", specs: Mapping, dataset: str, labels_path: str, seed: int,
+                 scores: Mapping | None = None) -> dict:
     """The content of summary.json."""
     tallies = tally(run.rows)
     n_col = sum(1 for lab in run.labels if lab.collision)
@@ -102,6 +164,7 @@ def summary_dict(run: "DatasetRun", specs: Mapping, dataset: str, labels_path: s
                 dflt = [s for s in cand if s["is_default"]]
                 best.setdefault(m, {})[c] = {
                     "parameter": b["parameter"], "best_value": b["value"], "best_accuracy": b["accuracy"],
+                    "best_is_in_sample": True,
                     "default_value": specs[m].default,
                     "default_accuracy": dflt[0]["accuracy"] if dflt else None, "method": specs[m].method,
                 }
@@ -119,6 +182,10 @@ def summary_dict(run: "DatasetRun", specs: Mapping, dataset: str, labels_path: s
         "results": acc,
         "paper_table2": {m: TABLE2[m] for m in run.models if m in TABLE2},
         "threshold_sweep": best,
+        "threshold_sweep_note": "best_value/best_accuracy are in-sample: the alert level was chosen on the same "
+                                "clips it is scored on; see scores.*.cv for an out-of-sample accuracy",
+        "never_alerts_accuracy": never_alerts_accuracy(run.labels),
+        "scores": dict(scores or {}),
         "errors": [{"clip": r["clip"], "model": r["model"], "condition": r["condition"], "error": r["error"]}
                    for r in run.rows if r.get("error")],
         "ran": run.ran,
@@ -170,6 +237,7 @@ def summary_markdown(run: "DatasetRun", summary: Mapping, specs: Mapping) -> str
             L.append(f"| {m} | {c} | {d['TP']} | {d['TN']} | {d['FP']} | {d['FN']} "
                      f"({d['FN_early']}/{d['FN_late']}/{d['FN_none']}) | {d['errors']} | {pct(d['accuracy'])} | "
                      f"{'' if lt is None else f'{lt:.0f} ms'} |")
+    L += scores_markdown(run, summary)
     L += ["", "## First alert per clip (frame, outcome; lead time before contact)", ""]
     cols = [(m, c) for m in run.models for c in run.conditions]
     L.append("| Clip | Label | Window (padded) | Contact | " + " | ".join(f"{m} {c}" for m, c in cols) + " |")
@@ -196,7 +264,9 @@ def summary_markdown(run: "DatasetRun", summary: Mapping, specs: Mapping) -> str
         L.append(f"| {lab.clip} | {lab.label} | {win} | {'' if lab.contact_frame is None else lab.contact_frame} | "
                  + " | ".join(cells) + " |")
     if run.sweep:
-        L += ["", "## Threshold sweep", "",
+        L += ["", "## Threshold sweep (in-sample)", "",
+              "In-sample: every row is scored on the same clips, so picking the best row picks the alert level "
+              "on the test clips; the cross-validated accuracy above is the out-of-sample figure. "
               "Accuracy, hits (TP) and false alarms (FP + early FN: an alert on a non-collision clip or before "
               "the window) as each model's alert level varies; re-scored from the saved traces. "
               "`threshold_sweep.csv` has every count; `figures/threshold_sweep.png` plots them.", ""]
@@ -227,6 +297,70 @@ def summary_markdown(run: "DatasetRun", summary: Mapping, specs: Mapping) -> str
     return "\n".join(L)
 
 
+def scores_table(run: "DatasetRun", summary: Mapping) -> tuple[list[str], list[list[str]]]:
+    """Header and rows of the honest-scores table (also used by report.html)."""
+    sc = summary.get("scores") or {}
+    header = ["Model", "Condition", "Accuracy [bootstrap 95% CI]", "ROC AUC", "CV accuracy (level held out)",
+              "Best level, accuracy (IN-SAMPLE)", "Hits before contact: n, median lead (range)",
+              "Hits at/after contact", "Frames held at rest"]
+    rows: list[list[str]] = []
+    for m in run.models:
+        for c in run.conditions:
+            d = (sc.get(m) or {}).get(c)
+            if not d:
+                continue
+            lt = d["lead_times"]
+            lead = f"{lt['hits_before_contact']}"
+            if lt["hit_lead_median_ms"] is not None:
+                lead += (f", {lt['hit_lead_median_ms']:.0f} ms ({lt['hit_lead_min_ms']:.0f}-"
+                         f"{lt['hit_lead_max_ms']:.0f})")
+            held = d.get("held")
+            best = d["in_sample_best"]
+            rows.append([m, c, pct_ci(d["accuracy_ci"]), "n/a" if d["auc"] is None else f"{d['auc']:.3f}",
+                         pct(d["cv"]["accuracy"]), f"{best['level']:.4g}: {pct(best['accuracy'])} (in-sample)",
+                         lead, str(lt["hits_at_or_after_contact"]),
+                         "" if not held else f"{100 * held['share']:.1f}% ({held['held_frames']}/{held['frames']})"])
+    base = summary.get("never_alerts_accuracy")
+    if base is not None:
+        from .clipscores import bootstrap_accuracy
+
+        n = summary["clips"]
+        ci = bootstrap_accuracy([not lab.collision for lab in run.labels], seed=summary.get("seed", 0))
+        rows.append(["never alerts (baseline)", "any", pct_ci(ci), "n/a", pct(base), "", "0", "0", ""])
+        assert n == len(run.labels)
+    return header, rows
+
+
+def scores_markdown(run: "DatasetRun", summary: Mapping) -> list[str]:
+    """The "honest scores" section of summary.md."""
+    sc = summary.get("scores") or {}
+    if not sc:
+        return []
+    any_cv = next((d["cv"]["scheme"] for m in sc.values() for d in m.values()), "leave-one-out")
+    header, rows = scores_table(run, summary)
+    from .htmlreport import markdown_table
+
+    L = ["", "## Threshold-free and out-of-sample scores", "",
+         f"- Accuracy at each model's own threshold, with a seeded bootstrap 95% interval over clips "
+         f"(2000 resamples, seed {summary.get('seed', 0)}); with {summary['clips']} clips one clip moves accuracy "
+         f"by {100 / max(1, summary['clips']):.1f} points.",
+         "- ROC AUC: clip-level ROC over the alert level (hit = first alert inside the window, on collision clips; "
+         "false alarm = any alert on a non-collision clip); threshold-free. Early alerts count as misses, so AUC "
+         "can fall below 0.5.",
+         f"- CV accuracy: {any_cv} cross-validation; each clip is scored at the alert level chosen on the other "
+         "clips only (out-of-sample).",
+         f"- Best level: {IN_SAMPLE_NOTE}.",
+         "- Lead time: ms before the contact frame of first alerts inside the window; hits at or after contact "
+         "warn of nothing and are counted separately.",
+         f"- never alerts (baseline): a model that never alerts scores the share of non-collision clips, "
+         f"{pct(summary.get('never_alerts_accuracy'))} here.",
+         "- Frames held at rest: share of frames on which LGMD1 / F-LGMD ONn were held at rest by their "
+         "feed-forward inhibition (no output possible); empty for models without such a state.",
+         ""]
+    L += markdown_table(header, rows)
+    return L
+
+
 def write_reports(run: "DatasetRun", dataset: str, labels_path: str, seed: int, figures: bool = True,
                   progress: bool = False) -> None:
     """Write results.csv, threshold_sweep.csv, summary.md/json and (optionally) the figures."""
@@ -237,10 +371,15 @@ def write_reports(run: "DatasetRun", dataset: str, labels_path: str, seed: int, 
     traces = load_traces(run)
     run.sweep, specs = threshold_sweep(run, traces)
     atomic_write_text(out / "threshold_sweep.csv", csv_text(run.sweep, SWEEP_COLUMNS))
-    run.summary = summary_dict(run, specs, dataset, labels_path, seed)
+    scores = honest_scores(run, traces, specs, seed=seed)
+    run.summary = summary_dict(run, specs, dataset, labels_path, seed, scores)
     atomic_write_json(out / "summary.json", run.summary)
     atomic_write_text(out / "summary.md", summary_markdown(run, run.summary, specs))
+    pngs: list = []
     if figures:
         from .figures import dataset_figures
 
-        dataset_figures(run, traces, specs, progress=progress)
+        pngs = dataset_figures(run, traces, specs, progress=progress)
+    from .report_page import write_dataset_html
+
+    write_dataset_html(run, run.summary, specs, pngs)

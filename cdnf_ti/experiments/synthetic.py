@@ -12,37 +12,20 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from ..atomic import atomic_write, atomic_write_text
+from ..atomic import atomic_write_text
 
 DEFAULT_CLIPS = ("dark_looming", "light_translating", "light_looming", "dark_receding")
 
 
 def write_video(path: str | os.PathLike, frames: Iterable[np.ndarray], fps: float = 30.0) -> Path:
-    """Write grey frames (float in [0, 1] or uint8) to a lossless FFV1 AVI file, atomically."""
-    import cv2
-
-    frames = list(frames)
-    if not frames:
-        raise ValueError(f"{path}: no frames to write")
-    h, w = frames[0].shape[:2]
-
-    def _w(tmp: str) -> None:
-        wr = cv2.VideoWriter(tmp, cv2.VideoWriter_fourcc(*"FFV1"), float(fps), (w, h), True)
-        if not wr.isOpened():  # pragma: no cover - depends on the OpenCV build
-            raise RuntimeError(f"{path}: OpenCV cannot write FFV1 video")
-        try:
-            for f in frames:
-                a = np.asarray(f)
-                if a.dtype != np.uint8:
-                    a = np.clip(np.rint(a * 255.0), 0, 255).astype(np.uint8)
-                wr.write(cv2.cvtColor(a, cv2.COLOR_GRAY2BGR) if a.ndim == 2 else a)
-        finally:
-            wr.release()
+    """Write grey frames (float in [0, 1] or uint8) to a lossless FFV1 AVI file, atomically
+    (:func:`cdnf_ti.video.write_video`)."""
+    from ..video import write_video as _write
 
     path = Path(path)
     if path.suffix.lower() != ".avi":
         raise ValueError(f"{path}: write_video writes .avi (FFV1) files")
-    atomic_write(path, _w)
+    _write(path, frames, fps)
     return path
 
 

@@ -1,0 +1,520 @@
+"""Parameter sweeps: a grid of any model's parameters over a labelled dataset.
+
+``python -m cdnf_ti.run experiment sweep DIR --model cdnf --param h=0.1:0.3:5 --param alpha_on=0.3,0.5,0.7``
+
+* The grid is the product of every ``--param NAME=SPEC``; ``SPEC`` is
+  ``START:STOP:N`` (N evenly spaced values, both ends included), a comma list
+  ``V1,V2,...`` or one value. ``NAME`` is a field of the model's parameter
+  dataclass (``CDNFParams``, ``LGMD2Params``, ...). The whole grid is checked
+  (names, ranges, every combination built and validated) before any work.
+* One task per clip x setting (x condition), on local processes or a Dask
+  cluster (:func:`cdnf_ti.experiments.parallel.map_tasks`), each saving its trace
+  atomically under ``OUT/settings/<setting>/traces/<condition>/``; a rerun reuses
+  every finished task whose fingerprint (input, model, backend, setting, rain
+  seed) matches.
+* Per setting and condition: accuracy at the setting's own alert rule, the
+  clip-level ROC AUC over the alert level, leave-one-out (or k-fold)
+  cross-validated accuracy with the alert level chosen on the other folds, and
+  the best in-sample accuracy (marked as such).
+
+Output: ``OUT/param_sweep.csv``, ``OUT/param_sweep.json``, ``OUT/param_sweep.md``,
+``OUT/figures/param_sweep_*.png`` and ``OUT/report.html``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+import math
+import os
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..atomic import atomic_write_json
+from ..errors import InputError, UserError
+
+MAX_SETTINGS = 10_000
+
+
+@dataclass(frozen=True)
+class ParamAxis:
+    """One swept parameter: its name and values (typed like the dataclass field)."""
+
+    name: str
+    values: tuple
+
+
+def _field_kind(params_type: type, name: str) -> str:
+    fields = {f.name: f for f in dataclasses.fields(params_type)}
+    if name not in fields:
+        tunable = ", ".join(f.name for f in dataclasses.fields(params_type))
+        raise UserError(f"--param {name}: unknown parameter of {params_type.__name__}; known: {tunable}")
+    t = fields[name].type
+    t = t if isinstance(t, str) else getattr(t, "__name__", str(t))
+    for kind in ("bool", "int", "float", "str"):
+        if t.replace(" ", "").split("|")[0] == kind:
+            return kind
+    return "float"
+
+
+def _convert(kind: str, name: str, text: str) -> Any:
+    s = text.strip()
+    if s == "":
+        raise UserError(f"--param {name}: empty value")
+    if kind == "bool":
+        low = s.lower()
+        if low in ("1", "true", "yes", "on"):
+            return True
+        if low in ("0", "false", "no", "off"):
+            return False
+        raise UserError(f"--param {name}: {s!r} is not a boolean (true/false)")
+    if kind == "str":
+        return s
+    try:
+        v = float(s)
+    except ValueError:
+        raise UserError(f"--param {name}: {s!r} is not a number") from None
+    if not math.isfinite(v):
+        raise UserError(f"--param {name}: {s!r} is not a finite number")
+    if kind == "int":
+        if not v.is_integer():
+            raise UserError(f"--param {name}: {s!r} is not a whole number ({name} is an integer)")
+        return int(v)
+    return v
+
+
+def parse_param(spec: str, params_type: type) -> ParamAxis:
+    """Parse ``NAME=START:STOP:N``, ``NAME=V1,V2,...`` or ``NAME=V``.
+
+    Raises
+    ------
+    ValueError
+        One-line message: unknown parameter, malformed range, non-numeric or
+        duplicate value.
+    """
+    name, eq, body = spec.partition("=")
+    name = name.strip()
+    if not eq or not name:
+        raise UserError(f"--param {spec!r}: expected NAME=START:STOP:N or NAME=V1,V2,...")
+    kind = _field_kind(params_type, name)
+    body = body.strip()
+    if ":" in body:
+        parts = body.split(":")
+        if len(parts) != 3:
+            raise UserError(f"--param {name}={body}: a range is START:STOP:N (three parts)")
+        if kind in ("bool", "str"):
+            raise UserError(f"--param {name}={body}: {name} is a {kind}; list its values instead")
+        a, b = (_convert("float", name, p) for p in parts[:2])
+        try:
+            n = int(parts[2])
+        except ValueError:
+            raise UserError(f"--param {name}={body}: N must be a whole number of values, got {parts[2]!r}") from None
+        if n < 2:
+            raise UserError(f"--param {name}={body}: N must be at least 2 (give one value as {name}=V)")
+        if n > 1000:
+            raise UserError(f"--param {name}={body}: N = {n} values is too many (at most 1000)")
+        if a >= b:
+            raise UserError(f"--param {name}={body}: START must be below STOP")
+        vals = [float(v) for v in np.round(np.linspace(a, b, n), 10)]
+        if kind == "int":
+            if not all(float(v).is_integer() for v in vals):
+                raise UserError(f"--param {name}={body}: {name} is an integer but the range gives "
+                                 f"non-integer values {vals}")
+            vals = [int(v) for v in vals]
+    else:
+        vals = [_convert(kind, name, p) for p in body.split(",")]
+    if len(set(vals)) != len(vals):
+        raise UserError(f"--param {name}={body}: a value is repeated")
+    return ParamAxis(name, tuple(vals))
+
+
+def setting_key(setting: dict) -> str:
+    """File-name-safe key of one setting, e.g. ``h=0.1,alpha_on=0.3``."""
+    def fmt(v: Any) -> str:
+        return f"{v:.6g}" if isinstance(v, float) else str(v)
+
+    key = ",".join(f"{k}={fmt(v)}" for k, v in setting.items())
+    return "".join(ch if ch.isalnum() or ch in "=,._-" else "_" for ch in key) or "default"
+
+
+def build_grid(model: str, param_specs: Sequence[str]) -> tuple[type, list[ParamAxis], list[dict]]:
+    """Parse every ``--param`` and check every combination builds valid parameters.
+
+    Returns
+    -------
+    (params_type, axes, settings)
+        ``settings`` is the grid, one dict per setting (the first axis varies slowest).
+
+    Raises
+    ------
+    ValueError
+        One line naming the bad ``--param`` or the first invalid combination.
+    """
+    from ..models import get_model_class
+
+    cls = get_model_class(model)
+    ptype = cls.params_type
+    if not dataclasses.is_dataclass(ptype):
+        raise UserError(f"model {cls.name} has no parameter dataclass to sweep")
+    axes = [parse_param(s, ptype) for s in param_specs]
+    names = [a.name for a in axes]
+    dup = [n for n in names if names.count(n) > 1]
+    if dup:
+        raise UserError(f"--param {dup[0]} is given twice")
+    n = 1
+    for a in axes:
+        n *= len(a.values)
+    if n > MAX_SETTINGS:
+        raise UserError(f"the grid has {n} settings; at most {MAX_SETTINGS}")
+    settings = [dict(zip(names, combo)) for combo in itertools.product(*(a.values for a in axes))] or [{}]
+    for s in settings:
+        try:
+            ptype(**s)
+        except (ValueError, TypeError) as e:
+            desc = ", ".join(f"{k}={v}" for k, v in s.items())
+            raise UserError(f"--param setting {desc} is invalid: {str(e).splitlines()[0]}") from None
+    return ptype, axes, settings
+
+
+@dataclass(frozen=True)
+class SweepTask:
+    """One clip x setting x condition.
+
+    Attributes
+    ----------
+    clip, path : str
+    model : str
+    setting : tuple of (name, value)
+    key : str
+        :func:`setting_key` of the setting.
+    condition : {"clean", "rain"}
+    out : str
+        The sweep's output folder (the task writes under ``OUT/settings/<key>``).
+    seed : int
+    backend, arch : str
+    downscale : float
+        Frames are resized by this factor (1 = native size).
+    """
+
+    clip: str
+    path: str
+    model: str
+    setting: tuple
+    key: str
+    condition: str
+    out: str
+    seed: int = 0
+    backend: str = "taichi"
+    arch: str = "cpu"
+    downscale: float = 1.0
+
+
+def describe_task(task: SweepTask, result: Any = None) -> str:
+    """Progress line of one task: ``c01 [cdnf h=0.1,alpha_off=0.7, clean]: 12.3 s``."""
+    line = f"{task.clip} [{task.model} {task.key}, {task.condition}]"
+    if isinstance(result, dict):
+        if result.get("error"):
+            return f"{line}: error: {result['error']}"
+        if result.get("seconds") is not None:
+            return f"{line}: {result['seconds']:.1f} s"
+    return line
+
+
+def setting_folder(out: str | os.PathLike, key: str) -> Path:
+    return Path(out) / "settings" / key
+
+
+def task_fingerprint(task: SweepTask) -> dict:
+    """The dataset fingerprint of the input plus the setting and the downscale factor."""
+    from .dataset import fingerprint
+
+    fp = fingerprint(task.path, task.condition, task.model, task.seed, task.backend, None)
+    fp["params"] = {k: v for k, v in task.setting}
+    fp["downscale"] = task.downscale
+    return json.loads(json.dumps(fp))
+
+
+def _resized(frames, factor: float):
+    import cv2
+
+    for f in frames:
+        h, w = f.shape[:2]
+        yield cv2.resize(f, (max(2, round(w * factor)), max(2, round(h * factor))), interpolation=cv2.INTER_AREA)
+
+
+def run_sweep_task(task: SweepTask) -> dict:
+    """Run one model setting on one clip; save its trace and record (atomically).
+
+    Returns
+    -------
+    dict
+        The record (``error`` empty on success).
+    """
+    from ..frames import iter_grey, open_source
+    from ..models import create_model, get_model_class
+    from .dataset import load_meta, rain_seed, trace_path
+
+    base = dict(clip=task.clip, model=task.model, condition=task.condition, key=task.key)
+    sf = setting_folder(task.out, task.key)
+    try:
+        src = open_source(task.path)
+        cls = get_model_class(task.model)
+        params = cls.params_type(**dict(task.setting))
+        model = create_model(task.model, params, backend=task.backend, arch=task.arch, fps=src.fps)
+        frames = iter_grey(src)
+        if task.condition == "rain":
+            from ..stimuli.rain import RainyFrames
+
+            frames = iter(RainyFrames(frames, None, seed=rain_seed(task.seed, task.clip),
+                                      backend="numpy" if task.backend == "numpy" else "taichi"))
+        if task.downscale != 1.0:
+            frames = _resized(frames, task.downscale)
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            trace = model.run(frames)
+        wall = time.perf_counter() - t0
+    except (InputError, ValueError, RuntimeError, OSError) as e:
+        return dict(base, error=str(e).splitlines()[0] if str(e) else type(e).__name__)
+    meta = dict(base, frames=trace.n_frames, fps=float(src.fps), first_alert=trace.first_alert,
+                output_name=trace.output_name, threshold=trace.threshold, seconds=round(wall, 3),
+                setting={k: v for k, v in task.setting}, error="", fingerprint=task_fingerprint(task))
+    trace.to_csv(trace_path(sf, task.condition, task.clip, task.model))
+    atomic_write_json(trace_path(sf, task.condition, task.clip, task.model, "json"), meta)
+    assert load_meta(sf, task.condition, task.clip, task.model) is not None
+    return meta
+
+
+@dataclass
+class ParamSweepRun:
+    """What a parameter sweep produced."""
+
+    model: str
+    axes: list
+    settings: list
+    conditions: list
+    rows: list
+    records: dict
+    out: Path
+    ran: int = 0
+    skipped: int = 0
+    errors: list = dataclasses.field(default_factory=list)
+
+
+def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | None, out: str | os.PathLike,
+                    model: str, param_specs: Sequence[str], rain: str = "none", padding=None, seed: int = 0,
+                    folds: int = 0, workers: int | None = None, scheduler: Any = None, backend: str = "taichi",
+                    arch: str = "cpu", progress: bool = True, figures: bool = True, downscale: float = 1.0,
+                    html: bool = True) -> ParamSweepRun:
+    """Run the grid over every labelled clip and write the sweep reports.
+
+    Parameters
+    ----------
+    folder, labels_path, out : path-like
+        Dataset folder, labels CSV (None: ``folder/labels.csv``), output folder.
+    model : str
+        Registry name.
+    param_specs : sequence of str
+        ``NAME=SPEC`` strings (see :func:`parse_param`).
+    rain : {"none", "only", "both"}
+    padding : Padding, optional
+    seed : int
+        Rain seed and k-fold shuffle seed.
+    folds : int
+        0 = leave-one-out cross-validation; k >= 2 = k folds.
+    workers, scheduler : see :func:`cdnf_ti.experiments.parallel.map_tasks`
+    backend, arch : str
+    progress, figures, html : bool
+    downscale : float
+        Resize factor of every frame (in (0, 1]; 1 = native).
+
+    Raises
+    ------
+    ValueError, InputError
+        Bad grid, bad labels, bad option: before any task runs.
+    """
+    from ..models import get_model_class
+    from .dataset import RAIN_CHOICES, load_meta
+    from .labels import read_labels, validate_dataset
+    from .parallel import TaskFailed, map_tasks
+    from .scoring import Padding
+
+    padding = padding or Padding()
+    if rain not in RAIN_CHOICES:
+        raise UserError(f"--rain must be one of {', '.join(RAIN_CHOICES)}, got {rain!r}")
+    if not (0 < downscale <= 1):
+        raise UserError(f"--downscale must be in (0, 1], got {downscale}")
+    if folds < 0 or folds == 1:
+        raise UserError(f"--folds must be 0 (leave-one-out) or at least 2, got {folds}")
+    name = get_model_class(model).name
+    _ptype, axes, settings = build_grid(name, param_specs)
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(folder, "dataset folder not found")
+    labels_path = Path(labels_path) if labels_path is not None else folder / "labels.csv"
+    labels = read_labels(labels_path)
+    files = validate_dataset(labels, folder, labels_path)
+    conditions = list(RAIN_CHOICES[rain])
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(out / "grid.json", {"model": name, "params": {a.name: list(a.values) for a in axes},
+                                          "settings": len(settings), "conditions": conditions,
+                                          "downscale": downscale, "dataset": str(folder),
+                                          "labels": str(labels_path)})
+    records: dict[tuple, dict] = {}
+    tasks: list[SweepTask] = []
+    skipped = 0
+    for s in settings:
+        key = setting_key(s)
+        for cond in conditions:
+            for lab in labels:
+                t = SweepTask(lab.clip, str(Path(files[lab.clip]).resolve()), name, tuple(s.items()), key, cond,
+                              str(out), seed, backend, arch, float(downscale))
+                meta = load_meta(setting_folder(out, key), cond, lab.clip, name, task_fingerprint(t))
+                if meta is not None:
+                    records[(key, cond, lab.clip)] = meta
+                    skipped += 1
+                else:
+                    tasks.append(t)
+    ran = 0
+    errors = []
+    import inspect
+
+    extra = {}
+    if "describe" in inspect.signature(map_tasks).parameters:  # progress lines naming the setting
+        extra["describe"] = describe_task
+    for i, res in map_tasks(run_sweep_task, tasks, workers=workers, scheduler=scheduler, arch=arch,
+                            progress=f"sweep {name}" if progress else False, **extra):
+        t = tasks[i]
+        if isinstance(res, TaskFailed):
+            res = dict(clip=t.clip, model=name, condition=t.condition, key=t.key, error=f"{t.path}: {res}")
+        records[(t.key, t.condition, t.clip)] = res
+        if res.get("error"):
+            errors.append(res)
+        else:
+            ran += 1
+    rows = evaluate(out, name, settings, conditions, labels, padding, folds, seed)
+    run = ParamSweepRun(name, axes, settings, conditions, rows, records, out, ran, skipped, errors)
+    from .sweep_reports import write_param_sweep_reports
+
+    write_param_sweep_reports(run, labels, padding, folds, seed, figures=figures, html=html)
+    return run
+
+
+def evaluate(out: Path, model: str, settings: Sequence[dict], conditions: Sequence[str], labels, padding,
+             folds: int = 0, seed: int = 0) -> list[dict]:
+    """Score every setting x condition from the saved traces.
+
+    Returns
+    -------
+    list of dict
+        One row per setting and condition: the setting's values, ``condition``,
+        ``clips``, ``accuracy`` (the setting's own alert rule), ``auc``,
+        ``cv_accuracy``, ``cv_scheme``, ``best_in_sample_accuracy``,
+        ``best_in_sample_level``, ``alert_parameter``, ``errors``.
+    """
+    from ..models.base import Trace
+    from .clipscores import cross_validated_accuracy, roc
+    from .dataset import trace_path
+    from .scoring import score_clip
+    from .sweep import sweep_first_alerts, sweep_spec
+
+    labs = {lab.clip: lab for lab in labels}
+    rows = []
+    for s in settings:
+        key = setting_key(s)
+        sf = setting_folder(out, key)
+        for cond in conditions:
+            traces = {}
+            fps_of: dict[str, float] = {}
+            n_err = 0
+            for lab in labels:
+                p = trace_path(sf, cond, lab.clip, model)
+                jp = trace_path(sf, cond, lab.clip, model, "json")
+                if not (p.is_file() and jp.is_file()):
+                    n_err += 1
+                    continue
+                traces[lab.clip] = Trace.from_csv(p, model=model)
+                try:
+                    fps_of[lab.clip] = float(json.loads(jp.read_text(encoding="utf-8")).get("fps") or 30.0)
+                except (OSError, ValueError):
+                    fps_of[lab.clip] = 30.0
+            row: dict[str, Any] = dict(s)
+            row.update(setting=key, condition=cond, clips=len(traces), errors=n_err)
+            if not traces:
+                rows.append(row)
+                continue
+            spec = sweep_spec(model, list(traces.values()))
+            levels = alert_levels(spec, list(traces.values()), s)
+            spec = dataclasses.replace(spec, values=tuple(levels))
+            default = setting_default_level(spec, s)
+            fas = {c: sweep_first_alerts(spec, tr) for c, tr in traces.items()}
+            own = [score_clip(tr.first_alert, labs[c], 30.0, padding).outcome in ("TP", "TN")
+                   for c, tr in traces.items()]
+            r = roc(fas, labs, levels, padding)
+            cv = cross_validated_accuracy(fas, labs, levels, padding, folds=folds, seed=seed, default=default)
+            from .clipscores import choose_level, correctness_matrix
+
+            _, cm = correctness_matrix(fas, labs, padding)
+            jb = choose_level(cm, levels, default)
+            row.update(alert_parameter=spec.parameter, accuracy=float(np.mean(own)), auc=r.auc,
+                       cv_accuracy=cv.accuracy, cv_scheme=cv.scheme,
+                       best_in_sample_accuracy=float(cm[:, jb].mean()), best_in_sample_level=levels[jb],
+                       max_output=float(max(tr.output.max() for tr in traces.values())),
+                       hits=sum(1 for c, tr in traces.items() if labs[c].collision and
+                                score_clip(tr.first_alert, labs[c], 30.0, padding).outcome == "TP"),
+                       false_alarms=sum(1 for c, tr in traces.items() if not labs[c].collision
+                                        and tr.first_alert is not None))
+            # the same scores when only alerts strictly before contact count as hits
+            pre = {c: before_contact(lab) for c, lab in labs.items()}
+            own_pre = [score_clip(tr.first_alert, pre[c], 30.0, padding).outcome in ("TP", "TN")
+                       for c, tr in traces.items()]
+            row.update(accuracy_pre_contact=float(np.mean(own_pre)), auc_pre_contact=roc(fas, pre, levels, padding).auc,
+                       cv_accuracy_pre_contact=cross_validated_accuracy(fas, pre, levels, padding, folds=folds,
+                                                                        seed=seed, default=default).accuracy)
+            leads = [score_clip(tr.first_alert, labs[c], fps_of.get(c, 30.0), padding)
+                     for c, tr in traces.items() if labs[c].collision]
+            hit_leads = [sc.lead_time_ms for sc in leads if sc.outcome == "TP" and sc.lead_time_ms is not None]
+            row.update(hits_before_contact=sum(1 for v in hit_leads if v > 0),
+                       median_hit_lead_ms=float(np.median([v for v in hit_leads if v > 0]))
+                       if any(v > 0 for v in hit_leads) else None)
+            rows.append(row)
+    return rows
+
+
+def before_contact(label):
+    """``label`` with its window cut to end one frame before contact (when the contact frame is known),
+    so that an alert at or after contact counts as late."""
+    if not label.collision or label.contact_frame is None:
+        return label
+    end = max(label.window_start, min(label.window_end, label.contact_frame - 1))
+    return dataclasses.replace(label, window_end=end)
+
+
+def alert_levels(spec, traces, setting: dict | None = None) -> list[float]:
+    """Alert levels to score: the model's sweep values, plus for C-DNF log-spaced
+    epsilons up to the largest ``I_v - 0.5`` seen (so the ROC reaches "never alerts")."""
+    vals = set(float(v) for v in spec.values)
+    if spec.method == "cdnf-epsilon":
+        top = max((float(np.nanmax(t.output)) - 0.5 for t in traces if t.n_frames), default=0.0)
+        if top > 1e-6:
+            vals.update(float(v) for v in np.round(np.geomspace(1e-6, top * 1.05, 40), 9))
+        if setting and "epsilon" in setting:
+            vals.add(float(setting["epsilon"]))
+    return sorted(vals)
+
+
+def setting_default_level(spec, setting: dict) -> float | None:
+    """The alert level the setting itself uses (C-DNF/SDNF ``epsilon``, LGMD ``n_ts``)."""
+    if spec.method == "cdnf-epsilon":
+        return float(setting.get("epsilon", spec.default))
+    if spec.parameter.startswith("n_ts") and "n_ts" in setting:
+        return float(setting["n_ts"])
+    if spec.parameter.startswith("epsilon") and "epsilon" in setting:
+        return float(setting["epsilon"])
+    return spec.default

@@ -1,0 +1,78 @@
+"""Field movies: render writes a playable MP4 (read back with OpenCV), and dataset --render makes one per clip."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+from cdnf_ti.experiments.synthetic import make_synthetic_dataset
+from cdnf_ti.video import write_video
+
+
+def _read_all(path):
+    cap = cv2.VideoCapture(str(path))
+    frames = []
+    while True:
+        ok, f = cap.read()
+        if not ok:
+            break
+        frames.append(f)
+    n, w, h = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)), int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), \
+        int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+    cap.release()
+    return frames, n, w, h
+
+
+def test_render_writes_a_playable_mp4_with_one_frame_per_input_frame(tmp_path):
+    out = tmp_path / "movie.mp4"
+    p = subprocess.run([sys.executable, "-m", "cdnf_ti.run", "render", "stim:dark_looming?size=64", "--model", "cdnf",
+                        "--out", str(out), "--no-progress"], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    frames, n, w, h = _read_all(out)
+    from cdnf_ti.inputs import resolve_input
+
+    n_in = resolve_input("stim:dark_looming?size=64").n_frames
+    assert len(frames) == n == n_in
+    # four 64x64 panels (2 x 2) above the trace panel
+    assert (w, h) == (128, 128 + 170) and frames[0].shape == (h, w, 3)
+    # the fields change as the square looms: the last frame's field panels differ from the first's
+    assert np.abs(frames[-1][:128].astype(int) - frames[1][:128].astype(int)).mean() > 1.0
+
+
+def test_unknown_movie_suffix_is_a_one_line_error_before_any_work(tmp_path):
+    p = subprocess.run([sys.executable, "-m", "cdnf_ti.run", "render", "stim:dark_looming?size=32",
+                        "--out", str(tmp_path / "m.gif")], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2
+    assert p.stderr.strip().count("\n") == 0 and "m.gif" in p.stderr and ".mp4" in p.stderr
+
+
+def test_the_one_writer_stores_every_frame_losslessly_in_avi(tmp_path):
+    frames = [np.full((24, 32), k * 10, np.uint8) for k in range(9)]
+    assert write_video(tmp_path / "a.avi", frames, 25.0) == 9
+    back, n, w, h = _read_all(tmp_path / "a.avi")
+    assert n == 9 and (w, h) == (32, 24)
+    assert all(np.array_equal(b[:, :, 0], f) for b, f in zip(back, frames))
+
+
+def test_dataset_render_makes_a_movie_per_clip(tmp_path):
+    make_synthetic_dataset(tmp_path / "ds", size=32, clips=("dark_looming", "light_translating"))
+    ds = tmp_path / "ds"
+    out = tmp_path / "out"
+    p = subprocess.run([sys.executable, "-m", "cdnf_ti.run", "dataset", str(ds), "--out", str(out), "--workers", "0",
+                        "--render", "--no-progress", "--no-figures"], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    for clip in ("dark_looming", "light_translating"):
+        frames, n, _w, _h = _read_all(out / "movies" / f"{clip}.cdnf.mp4")
+        assert n == len(frames) == 46
+
+
+@pytest.mark.parametrize("model", ["lgmd2", "sdnf"])
+def test_other_models_render_too(tmp_path, model):
+    from cdnf_ti.render import render_video
+
+    n = render_video("stim:dark_looming?size=32", model, tmp_path / "m.mp4", backend="numpy")
+    frames, m, _w, _h = _read_all(tmp_path / "m.mp4")
+    assert n == m == len(frames) > 10
