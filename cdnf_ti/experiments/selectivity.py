@@ -21,10 +21,12 @@ half-size 45% of the side, 1/t expansion, black/white):
 * named cases (``full``): settings other labs use, e.g. a light square
   receding from 550 px to 3 px over 50 frames at 600 px.
 
-Each model x stimulus is one task (:mod:`.parallel`), saved as
+Each model x stimulus is one task, saved as
 ``tasks/<key>.json`` (and its trace as ``traces/<key>.csv``); a rerun with the
 same output folder reuses every finished task whose specification is
-unchanged, so an interrupted sweep resumes.
+unchanged, so an interrupted sweep resumes. Tasks run in batches of one model
+at one frame size (:class:`GridBatch`) on local processes or Dask
+(:mod:`.parallel`), so each worker compiles a model's kernels once per shape.
 """
 from __future__ import annotations
 
@@ -264,6 +266,46 @@ def run_grid_task(task: GridTask) -> dict:
     return rec
 
 
+@dataclass(frozen=True)
+class GridBatch:
+    """Grid tasks of one model at one frame size, run one after another in one worker.
+
+    Taichi specialises the models' kernels to the frame shape, so a worker that
+    keeps one model at one shape compiles once per batch instead of once per
+    stimulus.
+    """
+
+    tasks: tuple
+
+
+def run_grid_batch(batch: GridBatch) -> list[dict]:
+    """Run every task of a batch (a failed task gives an error record, the rest go on)."""
+    from .parallel import _one_line
+
+    out = []
+    for t in batch.tasks:
+        try:
+            out.append(run_grid_task(t))
+        except Exception as e:  # noqa: BLE001 - one failed stimulus must not stop the batch
+            out.append({"spec": t.spec, "alert": None, "error": _one_line(e)})
+    return out
+
+
+def make_batches(tasks: Sequence[GridTask], chunk: int = 16) -> list[GridBatch]:
+    """Group tasks by (model, frame shape), in chunks of at most ``chunk`` tasks."""
+    groups: dict[tuple, list[GridTask]] = {}
+    for t in tasks:
+        kw = t.point.kwargs
+        shape = (kw.get("height"), kw.get("width"))
+        groups.setdefault((t.model, shape), []).append(t)
+    out = []
+    for g in groups.values():
+        for i in range(0, len(g), chunk):
+            out.append(GridBatch(tuple(g[i : i + chunk])))
+    out.sort(key=lambda b: -len(b.tasks))
+    return out
+
+
 def _load_done(task: GridTask) -> dict | None:
     try:
         rec = json.loads(task.result_file.read_text())
@@ -302,12 +344,14 @@ def selectivity_sweep(models: Sequence[str], out: str | Path, which: str = "quic
     results: list[dict | None] = [_load_done(t) for t in tasks]
     todo = [i for i, r in enumerate(results) if r is None]
     reused = len(tasks) - len(todo)
-    for j, res in map_tasks(run_grid_task, [tasks[i] for i in todo], workers=workers, scheduler=scheduler,
-                            arch=arch, progress="selectivity" if progress else False):
-        i = todo[j]
+    index = {tasks[i].key: i for i in todo}
+    batches = make_batches([tasks[i] for i in todo])
+    for j, res in map_tasks(run_grid_batch, batches, workers=workers, scheduler=scheduler, arch=arch,
+                            progress="selectivity (batches)" if progress else False):
         if isinstance(res, TaskFailed):
-            res = {"spec": tasks[i].spec, "alert": None, "error": str(res)}
-        results[i] = res
+            res = [{"spec": t.spec, "alert": None, "error": str(res)} for t in batches[j].tasks]
+        for t, r in zip(batches[j].tasks, res):
+            results[index[t.key]] = r
     rows = []
     for t, r in zip(tasks, results):
         p = t.point
