@@ -480,7 +480,7 @@ def selectivity_markdown(rows: list[dict], which: str = "quick") -> str:
     return head + agreement_markdown(rows) + fail + failures_markdown(rows) + "\n"
 
 
-def plot_selectivity_grid(path: str | Path, rows: list[dict]) -> Path:
+def plot_selectivity_grid(path: str | Path, rows: list[dict], dpi: int = 110) -> Path:
     """A panel per stimulus class: grid points (rows) x models (columns); green = alert matches
     Table I, red = differs, grey = no Table I entry; the cell shows the alert (1/0)."""
     import numpy as np
@@ -521,5 +521,5 @@ def plot_selectivity_grid(path: str | Path, rows: list[dict]) -> Path:
         axes[n // ncol][n % ncol].axis("off")
     fig.suptitle("Selectivity grid: green = alert as Table I, red = differs, grey = no Table I entry",
                  fontsize=9)
-    fig.tight_layout()
-    return save_figure(fig, path)
+    fig.tight_layout(rect=(0, 0, 1, 0.985))
+    return save_figure(fig, path, dpi=dpi)
