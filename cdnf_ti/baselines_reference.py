@@ -19,18 +19,18 @@ from .params import vartheta
 
 
 def eight_bit(grey: np.ndarray) -> np.ndarray:
-    """Grey frame as uint8 grey levels: uint8 as is, float in [0, 1] as ``rint(255 x)`` (float32).
+    """Grey frame as uint8 grey levels: uint8 as is, float in [0, 1] as ``floor(255 x + 0.5)`` (float32).
 
     The LGMD family works on 8-bit grey levels, as the authors' code, which
     takes byte frames and integer luminance changes (``HighpassFilter(byte,
     byte) -> int`` in ``lgmd2OpenSource.cs`` and ``LGMDs.cs``,
     fuqinbing/LGMD2-open-source): ``P``, the ON/OFF clip (``P >= 0.1``, i.e.
     ``P >= 1``) and PM/FFI then see the same integers as theirs for any float
-    input (both backends round the same way).
+    input (the Taichi ``load_frame`` kernel rounds the same way).
     """
     if grey.dtype == np.uint8:
         return grey
-    g = np.rint(np.asarray(grey, dtype=np.float32) * np.float32(255.0))
+    g = np.floor(np.asarray(grey, dtype=np.float32) * np.float32(255.0) + np.float32(0.5))
     return np.clip(g, 0, 255).astype(np.uint8)
 
 
@@ -40,7 +40,7 @@ def grey_levels(grey: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     grey : ndarray, shape (H, W)
-        uint8 (0..255) or float in [0, 1] (rounded to ``rint(255 x)``).
+        uint8 (0..255) or float in [0, 1] (rounded to ``floor(255 x + 0.5)``).
     """
     return eight_bit(grey).astype(np.float64)
 

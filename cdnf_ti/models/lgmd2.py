@@ -33,7 +33,6 @@ from typing import Any
 
 import numpy as np
 
-from ..baselines_reference import eight_bit
 from ..frames import to_grey
 from .base import Model, StepResult
 
@@ -177,7 +176,8 @@ class LGMDFamily(Model):
 
     Subclasses implement :meth:`_make_backend` and :meth:`_layers` (the
     per-pixel stages, returning ``sum G`` or ``None`` for a held frame).
-    Inputs are grey levels 0..255 (uint8 as is; float in [0, 1] times 255).
+    Inputs are grey levels 0..255 (uint8 as is; float in [0, 1] times 255,
+    rounded to integers as the authors' 8-bit input).
     """
 
     output_name = "K"
@@ -230,6 +230,13 @@ class LGMDFamily(Model):
 
     def _frame(self, frame: np.ndarray) -> np.ndarray:
         grey = to_grey(frame)
+        if grey.dtype != np.uint8:
+            # The authors' code takes 8-bit frames and integer luminance changes
+            # (lgmd2OpenSource.cs and LGMDs.cs, HighpassFilter(byte, byte) -> int,
+            # github.com/fuqinbing/LGMD2-open-source): float grey in [0, 1] is
+            # rounded to 0..255 first, so P, the ON clip (P >= 0.1, i.e. P >= 1)
+            # and PM/FFI see the same integers as theirs.
+            grey = np.rint(grey * np.float32(255.0)).astype(np.uint8)
         if self._be is None:
             self._be = self._make_backend(grey.shape)
         elif grey.shape != self._be.shape:
@@ -386,8 +393,8 @@ class TaichiLGMDBackend:
         self.ni = 2  # F-LGMD: scratch buffers
 
     def load(self, grey: np.ndarray, first: bool) -> float:
-        grey = eight_bit(grey)
-        return float(self.K.load_frame(grey, self.L, self.P, 1.0, int(first), self.blocks))
+        scale = 1.0 if grey.dtype == np.uint8 else 255.0
+        return float(self.K.load_frame(grey, self.L, self.P, scale, int(first), self.blocks))
 
     # -- LGMD2 ------------------------------------------------------------
     def layers(self, w_on: float | None = None, w_off: float | None = None) -> Any:
