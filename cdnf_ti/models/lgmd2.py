@@ -176,8 +176,7 @@ class LGMDFamily(Model):
 
     Subclasses implement :meth:`_make_backend` and :meth:`_layers` (the
     per-pixel stages, returning ``sum G`` or ``None`` for a held frame).
-    Inputs are grey levels 0..255 (uint8 as is; float in [0, 1] times 255,
-    rounded to integers as the authors' 8-bit input).
+    Inputs are grey levels 0..255 (uint8 as is; float in [0, 1] times 255).
     """
 
     output_name = "K"
@@ -230,13 +229,6 @@ class LGMDFamily(Model):
 
     def _frame(self, frame: np.ndarray) -> np.ndarray:
         grey = to_grey(frame)
-        if grey.dtype != np.uint8:
-            # The authors' code takes 8-bit frames and integer luminance changes
-            # (lgmd2OpenSource.cs and LGMDs.cs, HighpassFilter(byte, byte) -> int,
-            # github.com/fuqinbing/LGMD2-open-source): float grey in [0, 1] is
-            # rounded to 0..255 first, so P, the ON clip (P >= 0.1, i.e. P >= 1)
-            # and PM/FFI see the same integers as theirs.
-            grey = np.rint(grey * np.float32(255.0)).astype(np.uint8)
         if self._be is None:
             self._be = self._make_backend(grey.shape)
         elif grey.shape != self._be.shape:
