@@ -83,6 +83,6 @@ def basic_frames(name: str, n_frames: int, height: int = 600, width: int = 600,
     """
     from ..stimuli.basic import basic_stimulus
 
-    st = basic_stimulus(name, height=height, width=width, start_half_size=min(height, width) / 60)
+    st = basic_stimulus(name, height=height, width=width)
     k0 = max(0, st.n_frames // 2 - n_frames // 2) if start is None else start
     return [st.frame(k) for k in range(k0, min(st.n_frames, k0 + n_frames))]

@@ -18,18 +18,31 @@ import numpy as np
 from .params import vartheta
 
 
+def eight_bit(grey: np.ndarray) -> np.ndarray:
+    """Grey frame as uint8 grey levels: uint8 as is, float in [0, 1] as ``floor(255 x + 0.5)`` (float32).
+
+    The LGMD family works on 8-bit grey levels, as the authors' code, which
+    takes byte frames and integer luminance changes (``HighpassFilter(byte,
+    byte) -> int`` in ``lgmd2OpenSource.cs`` and ``LGMDs.cs``,
+    fuqinbing/LGMD2-open-source): ``P``, the ON/OFF clip (``P >= 0.1``, i.e.
+    ``P >= 1``) and PM/FFI then see the same integers as theirs for any float
+    input (the Taichi ``load_frame`` kernel rounds the same way).
+    """
+    if grey.dtype == np.uint8:
+        return grey
+    g = np.floor(np.asarray(grey, dtype=np.float32) * np.float32(255.0) + np.float32(0.5))
+    return np.clip(g, 0, 255).astype(np.uint8)
+
+
 def grey_levels(grey: np.ndarray) -> np.ndarray:
-    """Grey frame as float64 grey levels in 0..255.
+    """Grey frame as float64 grey levels in 0..255 (:func:`eight_bit`, then float64).
 
     Parameters
     ----------
     grey : ndarray, shape (H, W)
-        uint8 (0..255) or float in [0, 1] (multiplied by 255).
+        uint8 (0..255) or float in [0, 1] (rounded to ``floor(255 x + 0.5)``).
     """
-    g = grey.astype(np.float64)
-    if grey.dtype != np.uint8:
-        g *= 255.0
-    return g
+    return eight_bit(grey).astype(np.float64)
 
 
 def neighbour_sums(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -29,7 +29,7 @@ def selectivity_table(models: Sequence[str], size: int = 600, backend: str = "ta
     for name in models:
         result[name] = {}
         for stim in BASIC_STIMULI:
-            s = basic_stimulus(stim, height=size, width=size, start_half_size=size / 60)
+            s = basic_stimulus(stim, height=size, width=size)
             model = create_model(name, backend=backend, arch=arch, fps=s.fps)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", NotConvergedWarning)  # recorded in "converged"

@@ -52,7 +52,7 @@ def generate_main(argv: Sequence[str]) -> int:
     ap.add_argument("--coherence", type=float, default=1.0, help="coherence degree c in (0, 1] (default 1)")
     ap.add_argument("--seed", type=seed_arg, default=0, help="seed of the incoherent displacement (default 0)")
     ap.add_argument("--size", type=int, default=None,
-                    help="frame height = width in px (default 600); start half-size scales as size/60")
+                    help="frame height = width in px (default 600); start half-size scales as size/60 (default_start_half_size)")
     ap.add_argument("--height", type=int, default=None)
     ap.add_argument("--width", type=int, default=None)
     ap.add_argument("--fps", type=positive_float, default=None, help="frames per second (default 30)")
@@ -74,7 +74,7 @@ def generate_main(argv: Sequence[str]) -> int:
     prepare_output(Path(args.out).parent)  # before any work: the output's folder must be writable
     kw: dict = {}
     if args.size is not None:
-        kw.update(height=args.size, width=args.size, start_half_size=args.size / 60.0)
+        kw.update(height=args.size, width=args.size)  # start half-size: default_start_half_size
     for k in ("height", "width", "fps", "duration"):
         if getattr(args, k) is not None:
             kw[k] = getattr(args, k)

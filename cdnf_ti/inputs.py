@@ -7,8 +7,9 @@ Generated stimuli are named ``stim:NAME`` with optional query parameters::
 
 ``NAME`` is one of :data:`cdnf_ti.stimuli.basic.BASIC_STIMULI`. Parameters:
 ``coherence`` (default 1: the coherent stimulus), ``seed`` (0), ``size`` (sets
-height = width and, unless given, ``start_half_size = size / 60`` so the
-geometry matches the 600 px default), ``height``, ``width``, ``fps``,
+height = width; ``start_half_size`` defaults to ``min(height, width) / 60``,
+:func:`cdnf_ti.stimuli.basic.default_start_half_size`, so the geometry matches
+the 600 px default), ``height``, ``width``, ``fps``,
 ``duration``, ``start_half_size``, ``end_half_size``, ``bar_width``. Frames
 are generated on the fly; nothing is written to disk.
 """
@@ -84,7 +85,6 @@ def make_stimulus(name: str, params: dict[str, Any]):
     if size is not None:
         p.setdefault("height", size)
         p.setdefault("width", size)
-        p.setdefault("start_half_size", size / 60.0)
     base = basic_stimulus(name, **p)
     if coherence == 1.0 and "coherence" not in params:
         return base

@@ -113,14 +113,23 @@ def _gauss3(x: ti.template(), i, j, H, W, g0, g1, g2):
 @ti.kernel
 def load_frame(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, scale: ti.f32, first: ti.i32,
                blocks: ti.i32) -> ti.f64:
-    """``g = frame * scale`` (grey levels); ``P = g - L`` (0 when ``first``); ``L = g``; returns ``sum |P|``."""
+    """``g = floor(frame * scale + 0.5)`` (integer grey levels); ``P = g - L`` (0 when ``first``); ``L = g``.
+
+    Returns ``sum |P|``. The rounding makes float input (``scale = 255``) the
+    8-bit grey levels the authors' code works on (``HighpassFilter(byte, byte)
+    -> int`` in lgmd2OpenSource.cs / LGMDs.cs, fuqinbing/LGMD2-open-source);
+    uint8 input (``scale = 1``) is unchanged. NumPy reference:
+    :func:`cdnf_ti.baselines_reference.eight_bit`.
+    """
     H, W = L.shape[0], L.shape[1]
     total = ti.f64(0.0)
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
         acc = ti.f64(0.0)
         for j in range(j0, j1):
-            p = luminance_change(frame, L, i, j, scale, first)
+            g = ti.floor(ti.cast(frame[i, j], ti.f32) * scale + 0.5)
+            p = ti.select(first != 0, 0.0, g - L[i, j])
+            L[i, j] = g
             P[i, j] = p
             acc += ti.cast(ti.abs(p), ti.f64)
         ti.atomic_add(total, acc)

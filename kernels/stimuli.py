@@ -115,3 +115,39 @@ def rain_blend(frame: ti.types.ndarray(ndim=2), rain: F2, out: F2, scale: ti.f32
             e += d * d
         signal[k] = s
         noise[k] = e
+
+
+@ti.kernel
+def render_box(out: F2, y0: ti.i32, y1: ti.i32, x0: ti.i32, x1: ti.i32, obj: ti.f32, bg: ti.f32,
+               blocks: ti.i32):
+    """``out = obj`` on rows ``y0..y1-1`` x columns ``x0..x1-1`` (clipped to the frame), else ``bg``.
+
+    One axis-aligned rectangle on a uniform background: the looming/receding
+    square and the translating bar (:mod:`cdnf_ti.stimuli.basic`). Bounds are
+    integers computed in Python, so the frame equals the NumPy reference exactly.
+    """
+    H, W = out.shape[0], out.shape[1]
+    for k in range(H * blocks):
+        i, j0, j1 = block_span(k, W, blocks)
+        inside_row = (i >= y0) & (i < y1)
+        for j in range(j0, j1):
+            out[i, j] = ti.select(inside_row & (j >= x0) & (j < x1), obj, bg)
+
+
+@ti.kernel
+def render_grating(out: F2, shift: ti.i32, period: ti.i32, bar: ti.i32, vertical: ti.i32, obj: ti.f32,
+                   bg: ti.f32, blocks: ti.i32):
+    """Square-wave grating: ``out = obj`` where ``(p - shift) mod period < bar``, else ``bg``.
+
+    ``p`` is the column (``vertical = 1``: vertical bars drifting along x) or the
+    row (``vertical = 0``). All integer arithmetic, so the frame equals the
+    NumPy reference (:func:`cdnf_ti.stimuli.grating.grating_numpy`) exactly.
+    """
+    H, W = out.shape[0], out.shape[1]
+    for k in range(H * blocks):
+        i, j0, j1 = block_span(k, W, blocks)
+        for j in range(j0, j1):
+            p = ti.select(vertical != 0, j, i)
+            q = (p - shift) % period
+            q = ti.select(q < 0, q + period, q)
+            out[i, j] = ti.select(q < bar, obj, bg)

@@ -377,7 +377,7 @@ def luminance_match_table(coherences: Sequence[float] = (1.0, 0.95, 0.75, 0.5, 0
     for name in names:
         cells = []
         for c in coherences:
-            s = incoherent_stimulus(name, c, seed, height=size, width=size, start_half_size=size / 60)
+            s = incoherent_stimulus(name, c, seed, height=size, width=size)
             m = luminance_change_match(s)
             halt = "" if m["halted_at"] is None else f", halt@{m['halted_at']}"
             halt += f", held {m['held_frames']}" if m["held_frames"] else ""

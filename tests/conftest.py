@@ -29,4 +29,4 @@ def small_stimulus(name: str, size: int = 96, **kw):
     """A basic stimulus scaled down for fast tests (same geometry as 600x600)."""
     from cdnf_ti.stimuli.basic import basic_stimulus
 
-    return basic_stimulus(name, height=size, width=size, start_half_size=size / 60, **kw)
+    return basic_stimulus(name, height=size, width=size, **kw)

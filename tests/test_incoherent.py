@@ -16,7 +16,7 @@ SIZE = 72
 
 
 def small(name: str, c: float, seed: int = 0, backend: str = "taichi", size: int = SIZE) -> IncoherentStimulus:
-    return incoherent_stimulus(name, c, seed, backend=backend, height=size, width=size, start_half_size=size / 60)
+    return incoherent_stimulus(name, c, seed, backend=backend, height=size, width=size)
 
 
 def n_object_coloured(frame: np.ndarray, value: float) -> int:

@@ -212,3 +212,18 @@ def test_sweep_alerts_at_default_count_reproduces_the_run_alerts():
     assert np.array_equal(alerts, tr.spike)
     loose = LGMD2.sweep_alerts(tr, [1.0])[0]
     assert loose.sum() >= tr.spike.sum()
+
+
+@pytest.mark.parametrize("backend", ["taichi", "numpy"])
+def test_float_frames_are_rounded_to_8_bit_grey_as_the_authors_code(backend):
+    """Float grey in [0, 1] runs as rint(255 x) uint8 (the authors' code takes byte frames)."""
+    from cdnf_ti.models import create_model
+    from cdnf_ti.stimuli.basic import basic_stimulus
+
+    s = basic_stimulus("dark_looming", height=48, width=48, object_grey=0.25, background_grey=0.75)
+    frames = [f.copy() for f in s.frames()]
+    a = create_model("lgmd2", backend=backend).run(iter(frames), progress=False)
+    b = create_model("lgmd2", backend=backend).run(
+        iter([np.rint(f * 255.0).astype(np.uint8) for f in frames]), progress=False)
+    assert np.array_equal(a.output, b.output)
+    assert np.array_equal(a.diagnostics["PM"], b.diagnostics["PM"])

@@ -55,7 +55,7 @@ class StimulusTask:
 
 def make_stimulus(name: str, size: int, coherence: float | None = None, seed: int = 0):
     """A basic (coherence None) or incoherent stimulus, scaled to ``size`` x ``size`` px."""
-    kw = dict(height=size, width=size, start_half_size=size / 60)
+    kw = dict(height=size, width=size)  # start half-size: default_start_half_size(size)
     if coherence is None:
         from ..stimuli.basic import basic_stimulus
 

@@ -157,14 +157,41 @@ def dataset_main(argv: Sequence[str]) -> int:
     return _dataset(args, folder, Path(args.out))
 
 
+def _selectivity(args) -> int:
+    from ..run import parse_models
+    from .selectivity import agreement_markdown, selectivity_sweep
+
+    coh = None
+    if args.coherences:
+        try:
+            coh = [float(c) for c in args.coherences.split(",") if c.strip()]
+        except ValueError:
+            raise UserError(f"--coherences must be numbers, got {args.coherences!r}") from None
+        for c in coh:
+            if not (0 < c <= 1):
+                raise UserError(f"coherence must be in (0, 1], got {c:g}")
+    classes = [c.strip() for c in args.classes.split(",")] if args.classes else None
+    res = selectivity_sweep(parse_models(args.models), args.out, which=args.grid, coherences=coh,
+                            seed=args.seed, workers=args.workers, scheduler=args.scheduler, backend=args.backend,
+                            arch=args.arch, progress=not args.no_progress, figures=not args.no_figures,
+                            classes=classes)
+    print(agreement_markdown(res["rows"]))
+    errs = [r for r in res["rows"] if r.get("error")]
+    for r in errs:
+        print(f"error: {r['stimulus']} {r['parameter']}={r['value']} [{r['model']}]: {r['error']}", file=sys.stderr)
+    print(f"{len(res['rows'])} runs: {res['ran']} run now, {res['reused']} reused; results in {args.out}/ "
+          "(selectivity.md, selectivity.csv, figures/)", file=sys.stderr)
+    return EXIT_FAILED if errs else EXIT_OK
+
+
 def experiment_main(argv: Sequence[str]) -> int:
-    """``python -m cdnf_ti.run experiment table1|coherence|table2 [...]``."""
+    """``python -m cdnf_ti.run experiment table1|coherence|selectivity|table2 [...]``."""
     from ..run import add_model_options, parse_models
     from . import builtin
 
     ap = argparse.ArgumentParser(prog="python -m cdnf_ti.run experiment",
                                  description="Regenerate the paper's experiments.")
-    sub = ap.add_subparsers(dest="which", required=True, metavar="{table1,coherence,table2,sweep}")
+    sub = ap.add_subparsers(dest="which", required=True, metavar="{table1,coherence,selectivity,table2,sweep}")
     p1 = sub.add_parser("table1", help="basic selectivity on the six basic stimuli (Table I, Fig. 2)")
     p2 = sub.add_parser("coherence", help="coherence sweep on the six incoherent stimuli (Fig. 4)")
     for p, name in ((p1, "table1"), (p2, "coherence")):
@@ -179,6 +206,20 @@ def experiment_main(argv: Sequence[str]) -> int:
     p2.add_argument("--coherences", default=",".join(f"{c:g}" for c in builtin.COHERENCES),
                     help="comma-separated coherence degrees in (0, 1] (default: %(default)s)")
     p2.add_argument("--stimuli", default=None, help="comma-separated basic stimuli (default: all six)")
+    p4 = sub.add_parser("selectivity", help="every model against Table I over a grid of stimulus settings "
+                                             "(sizes, speeds, grey levels, gratings, coherences)")
+    p4.add_argument("--out", default="cdnf_experiments/selectivity", help="output folder (default: %(default)s)")
+    add_model_options(p4, default_models="all")
+    grid_size = p4.add_mutually_exclusive_group()
+    grid_size.add_argument("--quick", dest="grid", action="store_const", const="quick", default="quick",
+                           help="small grid, base 120 px (default; a few minutes on 2 cores)")
+    grid_size.add_argument("--full", dest="grid", action="store_const", const="full",
+                           help="every level, base 240 px, up to 600 px frames, named cases")
+    p4.add_argument("--coherences", default=None,
+                    help="coherences of the incoherent versions (default: 0.5 quick; 0.8,0.5,0.2 full)")
+    p4.add_argument("--classes", default=None,
+                    help="comma-separated stimulus classes (looming,receding,translating,grating; default: all)")
+    _add_parallel(p4)
     p3 = sub.add_parser("table2", help="accuracy on a labelled folder, clean and with synthetic rain (Table II)")
     p3.add_argument("folder", nargs="?", default=None, metavar="DIR",
                     help="folder of videos with labels.csv (default: ../shared/data/real next to the repository)")
@@ -199,18 +240,20 @@ def experiment_main(argv: Sequence[str]) -> int:
     _add_dataset_options(p4, rain_default="none")
     args = ap.parse_args(list(argv))
 
-    if args.which == "sweep":
-        return _param_sweep(args)
+    from ..atomic import output_lock, prepare_output
+    from ..limits import check_frame_size
+    from ..run import check_model_options
+
+    if args.which in ("sweep", "selectivity"):
+        check_model_options(args)
+        with output_lock(prepare_output(args.out)):
+            return _param_sweep(args) if args.which == "sweep" else _selectivity(args)
     if args.which == "table2":
         folder = Path(args.folder) if args.folder else builtin.default_real_folder()
         if folder is None:
             raise InputError("table2", "no labelled folder given and ../shared/data/real was not found; "
                                        "pass one: python -m cdnf_ti.run experiment table2 DIR")
         return _dataset(args, folder, Path(args.out))
-    from ..atomic import output_lock, prepare_output
-    from ..limits import check_frame_size
-    from ..run import check_model_options
-
     if args.size < 16:
         raise UserError(f"--size must be at least 16 px, got {args.size}")
     check_frame_size(args.size, args.size, n_models=1, what="--size")

@@ -57,7 +57,7 @@ def make_synthetic_dataset(folder: str | os.PathLike, size: int = 96, clips: Seq
     head = "clip,label,window_start,window_end,contact_frame" + (",frames,description" if extra_columns else "")
     lines = [head]
     for name in clips:
-        s = basic_stimulus(name, height=size, width=size, start_half_size=size / 60)
+        s = basic_stimulus(name, height=size, width=size)
         write_video(folder / f"{name}.avi", s.frames(), s.fps)
         n = s.n_frames
         if s.motion == "looming":
