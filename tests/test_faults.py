@@ -547,3 +547,14 @@ def test_failed_task_is_reported_in_the_log(capsys):
     err = capsys.readouterr().err
     assert "[2/2] task 2" in err and "error: ValueError: math domain error" in err
     assert "1 failed" in err
+
+
+def test_table1_shows_error_for_a_failed_run_not_none():
+    from cdnf_ti.demo import format_table1
+    from cdnf_ti.stimuli.basic import BASIC_STIMULI
+
+    res = {"cdnf": {s: {"alert": 1 if "looming" in s or "receding" in s else 0} for s in BASIC_STIMULI}}
+    res["cdnf"]["dark_looming"] = {"alert": None, "error": "its worker process died"}
+    table = format_table1(res)
+    assert "None" not in table
+    assert "| Dark approaching | error |" in table
