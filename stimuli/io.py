@@ -21,7 +21,6 @@ import numpy as np
 
 from ..atomic import atomic_write, atomic_write_json
 from ..errors import InputError, OutputError, output_error
-from ..video import open_writer
 
 FORMATS = ("avi", "png")
 
@@ -95,7 +94,9 @@ def write_frames(frames: Iterable[np.ndarray], path: str | os.PathLike, fps: flo
                     for f in frames:
                         g = to_uint8(f)
                         if writer is None:
-                            try:  # the one writer of cdnf_ti (cdnf_ti/video.py)
+                            from ..video import open_writer  # the one writer of cdnf_ti
+
+                            try:
                                 writer = open_writer(tmp, fps, (g.shape[1], g.shape[0]), "FFV1", is_color=False,
                                                      name=path)
                             except InputError:

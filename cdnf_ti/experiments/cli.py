@@ -71,11 +71,6 @@ def _dataset(args, folder: Path, out: Path) -> int:
                       padding=Padding(args.pad_before, args.pad_after), seed=args.seed, workers=args.workers,
                       scheduler=args.scheduler, backend=args.backend, arch=args.arch,
                       progress=not args.no_progress, figures=not args.no_figures)
-    if getattr(args, "render", False):
-        from ..render import render_dataset
-
-        movies = render_dataset(run, folder, progress=not args.no_progress)
-        print(f"{len(movies)} field movies in {out}/movies/", file=sys.stderr)
     print(table2_markdown(run.summary["results"], run.models, run.conditions))
     for line in headline(run):
         print(line)
@@ -87,6 +82,12 @@ def _dataset(args, folder: Path, out: Path) -> int:
               f"not run: {shown}", file=sys.stderr)
     for e in run.summary["errors"]:
         print(f"error: {e['error']} [{e['model']}, {e['condition']}]", file=sys.stderr)
+
+    if getattr(args, "render", False):
+        from ..render import render_dataset
+
+        movies = render_dataset(run, folder, progress=not args.no_progress)
+        print(f"{len(movies)} field movies in {out}/movies/", file=sys.stderr)
     if run.failed:
         print(f"{run.n_errors} clip/model run(s) failed; see {out}/results.csv", file=sys.stderr)
         return EXIT_FAILED
