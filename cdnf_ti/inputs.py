@@ -10,7 +10,12 @@ Generated stimuli are named ``stim:NAME`` with optional query parameters::
 height = width; ``start_half_size`` defaults to ``min(height, width) / 60``,
 :func:`cdnf_ti.stimuli.basic.default_start_half_size`, so the geometry matches
 the 600 px default), ``height``, ``width``, ``fps``,
-``duration``, ``start_half_size``, ``end_half_size``, ``bar_width``. Frames
+``duration``, ``start_half_size``, ``end_half_size``, ``bar_width``,
+``expansion`` (``inverse`` or ``linear``), ``object_grey``,
+``background_grey``, ``speed`` (translating bar, px/s). ``stim:grating`` is the
+drifting grating (:class:`cdnf_ti.stimuli.grating.GratingStimulus`: ``size``,
+``height``, ``width``, ``fps``, ``duration``, ``period``, ``bar_width``,
+``speed``, ``orientation``, ``bar_grey``, ``background_grey``, ``seed``). Frames
 are generated on the fly; nothing is written to disk.
 """
 from __future__ import annotations
@@ -24,8 +29,12 @@ from .errors import InputError
 from .frames import FrameSource, open_source
 
 STIM_PREFIX = "stim:"
-_INT_KEYS = ("seed", "size", "height", "width", "bar_width")
-_FLOAT_KEYS = ("coherence", "fps", "duration", "start_half_size", "end_half_size")
+_INT_KEYS = ("seed", "size", "height", "width", "bar_width", "period")
+_FLOAT_KEYS = ("coherence", "fps", "duration", "start_half_size", "end_half_size", "speed", "object_grey",
+               "background_grey", "bar_grey")
+_TEXT_KEYS = ("expansion", "orientation")
+#: Generated stimuli beside the six basic ones.
+GRATING = "grating"
 
 
 @dataclass
@@ -60,12 +69,16 @@ def parse_stim_spec(spec: str) -> tuple[str, dict[str, Any]]:
 
     body = spec[len(STIM_PREFIX):] if spec.startswith(STIM_PREFIX) else spec
     name, _, query = body.partition("?")
-    if name not in BASIC_STIMULI:
-        raise InputError(spec, f"unknown stimulus {name!r}; choose one of {', '.join(BASIC_STIMULI)}")
+    if name not in BASIC_STIMULI and name != GRATING:
+        raise InputError(spec, f"unknown stimulus {name!r}; choose one of {', '.join(BASIC_STIMULI + (GRATING,))}")
     params: dict[str, Any] = {}
+    known = _INT_KEYS + _FLOAT_KEYS + _TEXT_KEYS
     for key, val in parse_qsl(query, keep_blank_values=True, strict_parsing=False):
-        if key not in _INT_KEYS + _FLOAT_KEYS:
-            raise InputError(spec, f"unknown parameter {key!r}; known: {', '.join(_INT_KEYS + _FLOAT_KEYS)}")
+        if key not in known:
+            raise InputError(spec, f"unknown parameter {key!r}; known: {', '.join(known)}")
+        if key in _TEXT_KEYS:
+            params[key] = val
+            continue
         try:
             params[key] = int(val) if key in _INT_KEYS else float(val)
         except ValueError:
@@ -85,6 +98,12 @@ def make_stimulus(name: str, params: dict[str, Any]):
     if size is not None:
         p.setdefault("height", size)
         p.setdefault("width", size)
+    if name == GRATING:
+        from .stimuli.grating import GratingStimulus
+
+        if "coherence" in params:
+            raise ValueError("a grating has no incoherent version (coherence applies to the basic stimuli)")
+        return GratingStimulus(seed=seed if "seed" in params else None, **p)
     base = basic_stimulus(name, **p)
     if coherence == 1.0 and "coherence" not in params:
         return base
@@ -100,7 +119,8 @@ def stimulus_label(name: str, params: dict[str, Any]) -> str:
         parts.append(f"s{params['seed']}")
     for k in sorted(params):
         if k not in ("coherence", "seed"):
-            parts.append(f"{k}{params[k]:g}")
+            v = params[k]
+            parts.append(f"{k}{v}" if isinstance(v, str) else f"{k}{v:g}")
     return "_".join(parts)
 
 

@@ -121,3 +121,22 @@ def test_grating_rejects_bad_parameters(kw, match):
 def test_grating_numpy_reference_handles_negative_shifts():
     f = grating_numpy(2, 10, -3, 5, 2, True, 1.0, 0.0)
     assert f[0].tolist() == [0, 0, 1, 1, 0, 0, 0, 1, 1, 0]
+
+
+def test_stim_spec_builds_a_grating_and_grid_settings():
+    from cdnf_ti.inputs import make_stimulus, parse_stim_spec
+
+    name, p = parse_stim_spec("stim:grating?size=64&period=16&speed=32&orientation=horizontal&seed=2")
+    g = make_stimulus(name, p)
+    assert isinstance(g, GratingStimulus)
+    assert (g.height, g.width, g.period, g.speed, g.orientation, g.seed) == (64, 64, 16, 32.0, "horizontal", 2)
+    name, p = parse_stim_spec("stim:light_looming?size=60&expansion=linear&object_grey=0.6&background_grey=0.4")
+    s = make_stimulus(name, p)
+    assert (s.expansion, s.object_value, s.background_value, s.start_half_size) == ("linear", 0.6, 0.4, 1.0)
+
+
+def test_stim_spec_refuses_an_incoherent_grating():
+    from cdnf_ti.inputs import make_stimulus, parse_stim_spec
+
+    with pytest.raises(ValueError, match="grating"):
+        make_stimulus(*parse_stim_spec("stim:grating?coherence=0.5"))
