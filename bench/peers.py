@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 
 from ..models.cdnf import CDNF
-from ..params import THETA_SCALE, CDNFParams, contrast_kernel, dog_kernel, dog_profiles, resting_level
+from ..params import THETA_SCALE, CDNFParams, contrast_kernel, dog_kernel, dog_profiles, resting_levels
 
 _SCIPY_MODE = {"replicate": "nearest", "reflect": "mirror", "zero": "constant"}
 _CV_BORDER = {"replicate": cv2.BORDER_REPLICATE, "reflect": cv2.BORDER_REFLECT_101,
@@ -44,9 +44,7 @@ class _PeerBase:
         self.P_on = np.zeros(self.shape, f)
         self.P_off = np.zeros(self.shape, f)
         self.S = np.zeros(self.shape, f)
-        g1, g2 = dog_profiles(params)
-        self.u0 = resting_level(params.h, 1.0)
-        self.v0 = resting_level(params.h, float(params.A * g1.sum() ** 2 - params.B * g2.sum() ** 2))
+        self.u0, self.v0 = resting_levels(params)
         self.u_on = np.full(self.shape, self.u0, f)
         self.u_off = np.full(self.shape, self.u0, f)
         self.v = np.full(self.shape, self.v0, f)
@@ -236,9 +234,5 @@ class PeerCDNF(CDNF):
         self.peer = peer
         self._peer_cls = peers[peer]
 
-    def _make_backend(self, shape: tuple[int, int]) -> None:
-        be = self._peer_cls(self.params, shape)
-        be.clear_input()
-        self._solve(be)
-        be.save_rest()
-        self._be = be
+    def _numpy_backend(self, shape: tuple[int, int]) -> "_PeerBase":
+        return self._peer_cls(self.params, shape)

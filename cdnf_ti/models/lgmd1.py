@@ -24,8 +24,11 @@ from typing import Any
 
 import numpy as np
 
+from ..baselines_reference import NumpyLGMD1Backend
+from ..params import check_params
 from .base import StepResult
-from .lgmd2 import LGMDFamily, TaichiLGMDBackend, _checks, lowpass_coefficient
+from .lgmd2 import LGMDFamily, TaichiLGMDBackend, lowpass_coefficient
+from .registry import register_model
 
 
 @dataclass(frozen=True)
@@ -81,7 +84,7 @@ class LGMD1Params:
     n_ts: int = 8
 
     def __post_init__(self) -> None:
-        _checks("LGMD1Params", [
+        check_params("LGMD1Params", [
             (self.tau_ffi >= 0, f"tau_ffi must be >= 0 ms, got {self.tau_ffi}"),
             (self.t_ffi > 0, f"t_ffi must be > 0, got {self.t_ffi}"),
             (len(self.k_lateral) == 2 and len(self.tau_lateral) == 2,
@@ -100,6 +103,7 @@ class LGMD1Params:
         return asdict(self)
 
 
+@register_model
 class LGMD1(LGMDFamily):
     """LGMD1 with ON/OFF pathways and SFA (Fu et al. 2018).
 
@@ -122,20 +126,14 @@ class LGMD1(LGMDFamily):
     params_type = LGMD1Params
     description = "LGMD1 with ON/OFF pathways and SFA (Fu et al. 2018); equations from the authors' code"
 
-    def _make_backend(self, shape: tuple[int, int]) -> Any:
-        if self.backend_name == "taichi":
-            return TaichiLGMDBackend(self.params, shape, self.dt, "lgmd1", self.arch)
-        from ..baselines_reference import NumpyLGMD1Backend
+    def _taichi_backend(self, shape: tuple[int, int]) -> TaichiLGMD1Backend:
+        return TaichiLGMD1Backend(self.params, shape, self.dt, self.arch)
 
+    def _numpy_backend(self, shape: tuple[int, int]) -> NumpyLGMD1Backend:
         return NumpyLGMD1Backend(self.params, shape, self.dt)
 
-    def step(self, frame: np.ndarray) -> StepResult:
+    def _step(self, t: int, grey: np.ndarray, sum_p: float) -> StepResult:
         p = self.params
-        grey = self._frame(frame)
-        be = self._be
-        t = self._t
-        self._t += 1
-        sum_p = be.load(grey, t == 0)
         if t == 0:
             return StepResult(t, 0.5, False, True, self._diag0())
         n_cells = grey.shape[0] * grey.shape[1]
@@ -165,3 +163,22 @@ class LGMD1(LGMDFamily):
     def _run_layers(self) -> tuple[float, dict[str, float], bool]:
         """Per-pixel stages of one frame: ``(sum G, extra diagnostics, converged)``."""
         return self._be.layers(), {}, True
+
+
+class TaichiLGMD1Backend(TaichiLGMDBackend):
+    """LGMD1 layers in Taichi (see :class:`LGMD1`)."""
+
+    LAYERS = ("I_on", "E_off", "S", "G")
+
+    def _setup(self) -> None:
+        p, dt = self.params, self.dt
+        self.a = tuple(dt / (dt + t) for t in p.tau_lateral)
+
+    def layers(self) -> float:
+        """ON/OFF, delayed spreads, S (thresholded), G; returns ``sum G``."""
+        p = self.params
+        c, q = self._next_buffers()
+        r = self.K.lgmd1_layers(self.P, self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.E_off,
+                                self.S, self.G, p.clip, p.dc, p.w_i_on, p.w_i_off, *p.k_lateral, *self.a,
+                                p.w_on_exc, p.w_off_exc, p.w_onoff, p.t_s, self.blocks)
+        return float(r)
