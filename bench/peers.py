@@ -24,13 +24,14 @@ import numpy as np
 
 from ..models.cdnf import CDNF
 from ..params import THETA_SCALE, CDNFParams, contrast_kernel, dog_kernel, dog_profiles, resting_levels
+from ..reference import RestingFields
 
 _SCIPY_MODE = {"replicate": "nearest", "reflect": "mirror", "zero": "constant"}
 _CV_BORDER = {"replicate": cv2.BORDER_REPLICATE, "reflect": cv2.BORDER_REFLECT_101,
               "zero": cv2.BORDER_CONSTANT}
 
 
-class _PeerBase:
+class _PeerBase(RestingFields):
     """State and the parts every peer shares (float32 fields, NumPy ufuncs)."""
 
     name = "peer"
@@ -50,16 +51,6 @@ class _PeerBase:
         self.v = np.full(self.shape, self.v0, f)
         self.tmp = np.zeros(self.shape, f)
         self.d = np.zeros(self.shape, f)
-        self._rest: tuple[np.ndarray, np.ndarray] | None = None
-
-    def save_rest(self) -> None:
-        self._rest = (self.u_on.copy(), self.v.copy())
-
-    def restore_rest(self) -> None:
-        u, v = self._rest
-        self.u_on[...] = u
-        self.u_off[...] = u
-        self.v[...] = v
 
     def load(self, grey: np.ndarray, first: bool) -> None:
         g = grey.astype(np.float32)

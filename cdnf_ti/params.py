@@ -14,12 +14,14 @@ with ``vartheta(a) = 2 / (1 + exp(-a)) - 1 = tanh(a / 2)`` and
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, replace
-from typing import Any
+from dataclasses import asdict, dataclass, replace
+from typing import Any, TypeVar
 
 import numpy as np
 
 BORDER_MODES = ("replicate", "reflect", "zero")
+
+P = TypeVar("P", bound="ModelParams")
 
 
 def vartheta(a: np.ndarray | float) -> np.ndarray | float:
@@ -82,8 +84,19 @@ def gaussian_profile(sigma: float, radius: int) -> np.ndarray:
     return np.exp(-(d**2) / (2.0 * sigma**2))
 
 
+class ModelParams:
+    """Shared behaviour of the models' frozen parameter dataclasses."""
+
+    def replace(self: P, **changes: Any) -> P:
+        """Return a copy with some fields changed (validated)."""
+        return replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
 @dataclass(frozen=True)
-class CDNFParams:
+class CDNFParams(ModelParams):
     """Parameters of the C-DNF model (defaults from MODEL.md / the paper).
 
     Attributes
@@ -185,13 +198,6 @@ class CDNFParams:
     def threshold(self) -> float:
         """Alert threshold ``I_thre = 0.5 + epsilon``."""
         return 0.5 + self.epsilon
-
-    def replace(self, **changes: Any) -> "CDNFParams":
-        """Return a copy with some fields changed (validated)."""
-        return replace(self, **changes)
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
 
 def contrast_kernel(sigma_c: float) -> np.ndarray:

@@ -54,7 +54,28 @@ def correlate(x: np.ndarray, kernel: np.ndarray, border: str) -> np.ndarray:
     return out
 
 
-class NumpyCDNFBackend:
+class RestingFields:
+    """The cold-start state of a C-DNF backend whose fields ``u_on``, ``u_off``, ``v`` are NumPy arrays."""
+
+    _rest: tuple[np.ndarray, np.ndarray] | None = None
+
+    def save_rest(self) -> None:
+        """Remember the current (resting) fields for cold starts."""
+        self._rest = (self.u_on.copy(), self.v.copy())
+
+    def restore_rest(self) -> None:
+        """Put all fields back to the remembered resting state."""
+        u, v = self._rest
+        self.u_on[...] = u
+        self.u_off[...] = u
+        self.v[...] = v
+
+    def reset(self) -> None:
+        """Back to the resting state (the :class:`~cdnf_ti.models.base.ModelBackend` contract)."""
+        self.restore_rest()
+
+
+class NumpyCDNFBackend(RestingFields):
     """C-DNF field state and updates in NumPy float64.
 
     Parameters
@@ -78,20 +99,8 @@ class NumpyCDNFBackend:
         self.u_off = np.full(self.shape, u0)
         self.v = np.full(self.shape, v0)
         self.S = np.zeros(self.shape)
-        self._rest: tuple[np.ndarray, np.ndarray] | None = None
 
     # -- state -----------------------------------------------------------
-    def save_rest(self) -> None:
-        """Remember the current (resting) fields for cold starts."""
-        self._rest = (self.u_on.copy(), self.v.copy())
-
-    def restore_rest(self) -> None:
-        """Put all fields back to the remembered resting state."""
-        u, v = self._rest
-        self.u_on[...] = u
-        self.u_off[...] = u
-        self.v[...] = v
-
     def load(self, grey: np.ndarray, first: bool) -> None:
         """Take a new frame: ``P = L(t) - L(t-1)`` (0 on the first frame).
 

@@ -4,17 +4,19 @@ Each model is one module with a :class:`Model` subclass decorated with
 :func:`register_model`; importing this package registers the built-in ones
 (``--models all`` runs them in the order imported here).
 """
-# isort: skip_file  (the import order below is the registration order)
 from __future__ import annotations
 
 from .base import Model, ModelBackend, NotConvergedWarning, StepResult, Sweepable, Trace
 from .registry import MODELS, create_model, get_model_class, register_model
 
+# The built-in models, imported (so registered) in this order: C-DNF, Table I's comparison models, LGMD1.
+# isort: off
 from .cdnf import CDNF
 from .sdnf import SDNF, SDNFParams
 from .lgmd2 import LGMD2, LGMD2Params
 from .lgmd1 import LGMD1, LGMD1Params
 from .flgmd import FLGMDONn, FLGMDParams
+# isort: on
 
 __all__ = ["MODELS", "Model", "ModelBackend", "Sweepable", "StepResult", "Trace", "NotConvergedWarning", "CDNF",
            "register_model", "get_model_class", "create_model",

@@ -224,8 +224,9 @@ class Model:
       backend's ``load`` returned;
     * :meth:`_reset_state` (optional): reset the model's scalar state;
     * :meth:`_setup` (optional): derived constants, once at construction;
-    * :meth:`_reset_backend` (optional): how the backend returns to its start
-      (default ``backend.reset()``).
+    * :meth:`_init_backend` (optional): prepare a new backend (e.g. solve a
+      resting state); :meth:`_reset_backend` (optional): return it to its
+      start (default ``backend.reset()``).
 
     Subclasses set ``name`` (registry key), ``output_name`` and
     ``params_type``, and are registered with
@@ -327,8 +328,10 @@ class Model:
     def _make_backend(self, shape: tuple[int, int]) -> ModelBackend:
         """Build the backend for frames of ``shape`` (H, W) and make it this model's."""
         make = self._taichi_backend if self.backend_name == "taichi" else self._numpy_backend
-        self._be = make(tuple(shape))
-        return self._be
+        backend = make(tuple(shape))
+        self._init_backend(backend)
+        self._be = backend
+        return backend
 
     # -- hooks supplied by each model ---------------------------------------------
     def _taichi_backend(self, shape: tuple[int, int]) -> ModelBackend:
@@ -358,6 +361,9 @@ class Model:
 
     def _reset_state(self) -> None:
         """Reset the model's own (scalar) state; called at construction and by :meth:`reset`."""
+
+    def _init_backend(self, backend: ModelBackend) -> None:
+        """Prepare a new backend before its first frame (default: nothing to do)."""
 
     def _reset_backend(self, backend: ModelBackend) -> None:
         """Return ``backend`` to its state before the first frame."""

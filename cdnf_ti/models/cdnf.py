@@ -76,6 +76,10 @@ class TaichiCDNFBackend:
         self.K.copy(self.rest_u, self.u_off[self.c])
         self.K.copy(self.rest_v, self.v[self.s])
 
+    def reset(self) -> None:
+        """Back to the resting state (the :class:`~cdnf_ti.models.base.ModelBackend` contract)."""
+        self.restore_rest()
+
     def load(self, grey: np.ndarray, first: bool) -> None:
         scale = 1.0 / 255.0 if grey.dtype == np.uint8 else 1.0
         self.K.load_frame(grey, self.L, self.P, scale, int(first))
@@ -281,6 +285,10 @@ class LaneTaichiCDNFBackend:
         ws.v[self.s].from_numpy(v)
         ws.all_active()
 
+    def reset(self) -> None:
+        """Back to the resting state (the :class:`~cdnf_ti.models.base.ModelBackend` contract)."""
+        self.restore_rest()
+
     def load(self, grey: np.ndarray, first: bool) -> None:
         ws = self._acquire()
         scale = 1.0 / 255.0 if grey.dtype == np.uint8 else 1.0
@@ -406,17 +414,11 @@ class CDNF(Model):
     def _numpy_backend(self, shape: tuple[int, int]) -> NumpyCDNFBackend:
         return NumpyCDNFBackend(self.params, shape)
 
-    def _make_backend(self, shape: tuple[int, int]) -> ModelBackend:
-        be = super()._make_backend(shape)
+    def _init_backend(self, be: ModelBackend) -> None:
         # The resting state for this frame size and border: the solution with no input.
         be.clear_input()
         self._solve(be)
         be.save_rest()
-        return be
-
-    def _reset_backend(self, backend: ModelBackend) -> None:
-        """Back to the resting state solved when the backend was made."""
-        backend.restore_rest()
 
     def _solve(self, be) -> tuple[SolveReport, SolveReport]:
         p = self.params

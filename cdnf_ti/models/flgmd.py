@@ -39,21 +39,20 @@ The reconstruction, per frame (grey levels 0..255, ``dt = 1000 // fps``):
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..baselines_reference import NumpyFLGMDBackend
-from ..params import check_params, contrast_kernel
+from ..params import ModelParams, check_params, contrast_kernel
 from ..solver import solve_fixed_point
-from .lgmd1 import LGMD1, LGMD1Params
+from .lgmd1 import LGMD1, LGMD1Params, lgmd1_checks
 from .lgmd2 import TaichiLGMDBackend
 from .registry import register_model
 
 
 @dataclass(frozen=True)
-class FLGMDParams:
+class FLGMDParams(ModelParams):
     """F-LGMD ONn parameters (RECONSTRUCTION; see the module docstring).
 
     Attributes
@@ -102,26 +101,19 @@ class FLGMDParams:
     stall_patience: int = 4
 
     def __post_init__(self) -> None:
-        check_params("FLGMDParams", [
+        check_params("FLGMDParams", lgmd1_checks(self) + [
             (self.sigma_e > 0, f"sigma_e must be > 0, got {self.sigma_e}"),
             (self.w_i_on >= 0 and self.w_i_off >= 0, "w_i_on/w_i_off must be >= 0"),
-            (len(self.k_lateral) == 2 and len(self.tau_lateral) == 2,
-             "k_lateral/tau_lateral must be (edge, diagonal)"),
             (all(k >= 0 for k in self.k_lateral), "k_lateral weights must be >= 0"),
-            (all(t >= 0 for t in self.tau_lateral), "tau_lateral must be >= 0 ms"),
             (self.contraction("on") < 1.0,
              f"beta_on={self.beta_on} breaks the contraction bound |beta| (1 + w_i sum K) < 1 "
              f"(got {self.contraction('on'):.3f}); the feedback fixed point is not guaranteed"),
             (self.contraction("off") < 1.0,
              f"beta_off={self.beta_off} breaks the contraction bound |beta| (1 + w_i sum K) < 1 "
              f"(got {self.contraction('off'):.3f}); the feedback fixed point is not guaranteed"),
-            (0 <= self.dc < 1, f"dc must be in [0, 1), got {self.dc}"),
-            (self.c_sig > 0, f"c_sig must be > 0, got {self.c_sig}"),
-            (self.tau_sfa > 0, f"tau_sfa must be > 0 ms, got {self.tau_sfa}"),
             (self.tol > 0, f"tol must be > 0, got {self.tol}"),
             (int(self.max_iter) == self.max_iter and self.max_iter >= 1, "max_iter must be a positive integer"),
             (0 < self.min_damping <= self.damping <= 1, "need 0 < min_damping <= damping <= 1"),
-            (int(self.n_ts) == self.n_ts and self.n_ts >= 1, f"n_ts must be a positive integer, got {self.n_ts}"),
         ])
 
     def contraction(self, channel: str = "on") -> float:
@@ -136,64 +128,6 @@ class FLGMDParams:
     def excitation_kernel(self) -> np.ndarray:
         """The 3x3 normalised Gaussian ``G_e``, shape (3, 3)."""
         return contrast_kernel(self.sigma_e)
-
-    def replace(self, **changes: Any) -> "FLGMDParams":
-        return replace(self, **changes)
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-
-@register_model
-class FLGMDONn(LGMD1):
-    """F-LGMD ONn (after Chang et al. 2023) -- a documented RECONSTRUCTION.
-
-    See the module docstring for the equations and which parameter values
-    are our own choices.
-
-    Parameters
-    ----------
-    params : FLGMDParams, optional
-    backend : {"taichi", "numpy"}
-    arch : str
-    fps : float
-
-    Notes
-    -----
-    ``output`` is ``K``; ``spike`` the collision alert (count >= 8);
-    ``converged`` is False when the feedback fixed point missed ``tol``.
-    Diagnostics: ``Kh, n, count, FFI, held, sum_G, iterations,
-    residual_on, residual_off``. :meth:`fields`: ``P, ON, OFF, S_on, S_off, S, G``.
-    """
-
-    name = "flgmd_onn"
-    params_type = FLGMDParams
-    description = ("F-LGMD ONn (after Chang et al. 2023): LGMD with instant negative ON feedback "
-                   "solved as a fixed point -- RECONSTRUCTION")
-
-    def _taichi_backend(self, shape: tuple[int, int]) -> TaichiFLGMDBackend:
-        return TaichiFLGMDBackend(self.params, shape, self.dt, self.arch)
-
-    def _numpy_backend(self, shape: tuple[int, int]) -> NumpyFLGMDBackend:
-        return NumpyFLGMDBackend(self.params, shape, self.dt)
-
-    def _diag0(self) -> dict[str, float]:
-        d = super()._diag0()
-        d.update(iterations=0, residual_on=0.0, residual_off=0.0)
-        return d
-
-    def _held_diag(self) -> dict[str, float]:
-        return dict(iterations=0, residual_on=0.0, residual_off=0.0)
-
-    def _run_layers(self) -> tuple[float, dict[str, float], bool]:
-        p = self.params
-        be = self._be
-        be.prepare()
-        rep = solve_fixed_point(be.feedback_iterate, 2, tol=p.tol, max_iter=p.max_iter, damping=p.damping,
-                                min_damping=p.min_damping, stall_patience=p.stall_patience)
-        sum_g = be.finish()
-        extra = dict(iterations=max(rep.iterations), residual_on=rep.residuals[0], residual_off=rep.residuals[1])
-        return sum_g, extra, rep.converged
 
 
 class TaichiFLGMDBackend(TaichiLGMDBackend):
@@ -245,3 +179,52 @@ class TaichiFLGMDBackend(TaichiLGMDBackend):
 
     def hold(self) -> None:
         """FFI-held frame: the channels keep their previous values (nothing to do)."""
+
+
+@register_model
+class FLGMDONn(LGMD1):
+    """F-LGMD ONn (after Chang et al. 2023) -- a documented RECONSTRUCTION.
+
+    See the module docstring for the equations and which parameter values
+    are our own choices.
+
+    Parameters
+    ----------
+    params : FLGMDParams, optional
+    backend : {"taichi", "numpy"}
+    arch : str
+    fps : float
+
+    Notes
+    -----
+    ``output`` is ``K``; ``spike`` the collision alert (count >= 8);
+    ``converged`` is False when the feedback fixed point missed ``tol``.
+    Diagnostics: ``Kh, n, count, FFI, held, sum_G, iterations,
+    residual_on, residual_off``. :meth:`fields`: ``P, ON, OFF, S_on, S_off, S, G``.
+    """
+
+    name = "flgmd_onn"
+    params_type = FLGMDParams
+    description = ("F-LGMD ONn (after Chang et al. 2023): LGMD with instant negative ON feedback "
+                   "solved as a fixed point -- RECONSTRUCTION")
+
+    taichi_backend_type = TaichiFLGMDBackend
+    numpy_backend_type = NumpyFLGMDBackend
+
+    def _diag0(self) -> dict[str, float]:
+        d = super()._diag0()
+        d.update(iterations=0, residual_on=0.0, residual_off=0.0)
+        return d
+
+    def _held_diag(self) -> dict[str, float]:
+        return dict(iterations=0, residual_on=0.0, residual_off=0.0)
+
+    def _run_layers(self) -> tuple[float, dict[str, float], bool]:
+        p = self.params
+        be = self._be
+        be.prepare()
+        rep = solve_fixed_point(be.feedback_iterate, 2, tol=p.tol, max_iter=p.max_iter, damping=p.damping,
+                                min_damping=p.min_damping, stall_patience=p.stall_patience)
+        sum_g = be.finish()
+        extra = dict(iterations=max(rep.iterations), residual_on=rep.residuals[0], residual_off=rep.residuals[1])
+        return sum_g, extra, rep.converged

@@ -28,13 +28,13 @@ base class :class:`LGMDFamily` that runs them identically for both backends.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, replace
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import numpy as np
 
 from ..baselines_reference import NumpyLGMD2Backend
-from ..params import check_params
+from ..params import ModelParams, check_params
 from ..taichi_runtime import ensure_taichi
 from .base import Model, StepResult
 from .registry import register_model
@@ -83,7 +83,7 @@ def spike_count(kh: float, t_sp: float, c_sp: float) -> int:
 
 
 @dataclass(frozen=True)
-class LGMD2Params:
+class LGMD2Params(ModelParams):
     """LGMD2 parameters (defaults: BASELINES.md / the authors' C# supplement).
 
     Attributes
@@ -160,120 +160,6 @@ class LGMD2Params:
             (self.tau_sfa > 0, f"tau_sfa must be > 0 ms, got {self.tau_sfa}"),
             (int(self.n_ts) == self.n_ts and self.n_ts >= 1, f"n_ts must be a positive integer, got {self.n_ts}"),
         ])
-
-    def replace(self, **changes: Any) -> "LGMD2Params":
-        return replace(self, **changes)
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-
-class LGMDFamily(Model):
-    """Shared orchestration of the LGMD family (both backends).
-
-    Subclasses supply their backends and equations (:class:`~cdnf_ti.models.base.Model`
-    hooks); the family shares the frame interval ``dt``, the scalar state
-    (PM/FFI, ``K``/``Kh`` history, spike count), the membrane/SFA step and the
-    spike count. Inputs are grey levels 0..255 (uint8 as is; float in [0, 1]
-    times 255). ``threshold`` is None: the alert is a spike count, not a level
-    of ``K`` (``Kh``/``n`` are diagnostics).
-    """
-
-    output_name = "K"
-
-    #: Threshold sweep (experiments): the spike count at which the alert fires.
-    sweep_parameter = "n_ts (alert while spike count >= value)"
-    sweep_values = tuple(float(v) for v in range(1, 21))
-
-    @classmethod
-    def sweep_default(cls) -> float:
-        return float(cls.params_type().n_ts)
-
-    @classmethod
-    def sweep_alerts(cls, trace: Any, values: Any) -> list[np.ndarray]:
-        """Alerts per frame at each count threshold, from the saved ``count`` diagnostic.
-
-        The spike count does not depend on the threshold, so ``count >= n_ts``
-        on the saved trace is exactly what a rerun with that ``n_ts`` gives.
-        """
-        count = np.asarray(trace.diagnostics["count"], dtype=np.float64)
-        return [count >= v for v in values]
-
-    def _setup(self) -> None:
-        self.dt = frame_interval_ms(self.fps)
-
-    def _reset_state(self) -> None:
-        self.pm = 0.0  # PM (LGMD2) or FFI (LGMD1 family), grey levels
-        self.k_prev = 0.0
-        self.kh_prev = 0.0
-        self.count = 0
-
-    def _spikes(self, kh: float) -> tuple[int, bool]:
-        p = self.params
-        n = spike_count(kh, p.t_sp, p.c_sp)
-        self.count = 0 if n == 0 else self.count + n
-        return n, self.count >= p.n_ts
-
-    def _membrane(self, sum_g: float, n_cells: int) -> tuple[float, float]:
-        """``K = sigmoid(sum G / (N c_sig))`` and its SFA-adapted ``Kh``; updates the history."""
-        p = self.params
-        k = 1.0 / (1.0 + math.exp(-sum_g / (n_cells * p.c_sig)))
-        a_s = p.tau_sfa / (p.tau_sfa + self.dt)
-        kh = sfa_step(self.kh_prev, self.k_prev, k, p.t_sfa, a_s, p.kh_floor)
-        self.k_prev, self.kh_prev = k, kh
-        return k, kh
-
-
-@register_model
-class LGMD2(LGMDFamily):
-    """LGMD2 collision-perception network (Fu et al. 2020), selective to darker looming objects.
-
-    Parameters
-    ----------
-    params : LGMD2Params, optional
-    backend : {"taichi", "numpy"}
-        Taichi kernels (float32 layers) or the NumPy float64 reference.
-    arch : str
-        Taichi architecture.
-    fps : float
-        Input frame rate; ``dt = 1000 // fps`` ms.
-
-    Notes
-    -----
-    ``output`` is ``K`` (sigmoid membrane potential); ``spike`` is the
-    collision alert (spike count >= 8). Diagnostics per frame: ``Kh``
-    (after SFA), ``n`` (spikes), ``count``, ``PM``, ``w_on``, ``w_off``,
-    ``sum_G``, ``max_Ce``. :meth:`fields`: ``P, ON, OFF, I_on, I_off, S, Ce, G``.
-    """
-
-    name = "lgmd2"
-    params_type = LGMD2Params
-    description = "LGMD2 (Fu et al. 2020): biased ON/OFF, adaptive inhibition, SFA; equations from the authors' code"
-
-    def _taichi_backend(self, shape: tuple[int, int]) -> TaichiLGMD2Backend:
-        return TaichiLGMD2Backend(self.params, shape, self.dt, self.arch)
-
-    def _numpy_backend(self, shape: tuple[int, int]) -> NumpyLGMD2Backend:
-        return NumpyLGMD2Backend(self.params, shape, self.dt)
-
-    def _step(self, t: int, grey: np.ndarray, sum_p: float) -> StepResult:
-        p = self.params
-        be = self._be
-        if t == 0:
-            return StepResult(t, 0.5, False, True, dict(Kh=p.kh_floor, n=0, count=0, PM=0.0,
-                                                        w_on=p.w_on_base, w_off=p.w_off_base,
-                                                        sum_G=0.0, max_Ce=0.0))
-        n_cells = grey.shape[0] * grey.shape[1]
-        a = lowpass_coefficient(self.dt, p.tau_pm)
-        self.pm = a * (sum_p / n_cells) + (1.0 - a) * self.pm
-        w_on = max(self.pm / p.t_pm, p.w_on_base)
-        w_off = max(self.pm / p.t_pm, p.w_off_base)
-        sum_g, max_ce = be.layers(w_on, w_off)
-        k, kh = self._membrane(sum_g, n_cells)
-        n, alert = self._spikes(kh)
-        diag = dict(Kh=kh, n=n, count=self.count, PM=self.pm, w_on=w_on, w_off=w_off,
-                    sum_G=sum_g, max_Ce=max_ce)
-        return StepResult(t, k, alert, True, diag)
 
 
 class TaichiLGMDBackend:
@@ -371,3 +257,126 @@ class TaichiLGMD2Backend(TaichiLGMDBackend):
                                 *p.k_on, *self.an, *p.k_off, *self.af, p.w_on_exc, p.w_off_exc, p.w_onoff,
                                 p.delta_c, p.c_w, p.c_de, p.t_de, self.blocks)
         return float(r[0]), float(r[1])
+
+
+class LGMDFamily(Model):
+    """Shared orchestration of the LGMD family (both backends).
+
+    Subclasses supply their backends and equations (:class:`~cdnf_ti.models.base.Model`
+    hooks); the family shares the frame interval ``dt``, the scalar state
+    (PM/FFI, ``K``/``Kh`` history, spike count), the membrane/SFA step and the
+    spike count. Inputs are grey levels 0..255 (uint8 as is; float in [0, 1]
+    times 255). ``threshold`` is None: the alert is a spike count, not a level
+    of ``K`` (``Kh``/``n`` are diagnostics).
+    """
+
+    output_name = "K"
+
+    #: Threshold sweep (experiments): the spike count at which the alert fires.
+    sweep_parameter = "n_ts (alert while spike count >= value)"
+    sweep_values = tuple(float(v) for v in range(1, 21))
+
+    @classmethod
+    def sweep_default(cls) -> float:
+        return float(cls.params_type().n_ts)
+
+    @classmethod
+    def sweep_alerts(cls, trace: Any, values: Any) -> list[np.ndarray]:
+        """Alerts per frame at each count threshold, from the saved ``count`` diagnostic.
+
+        The spike count does not depend on the threshold, so ``count >= n_ts``
+        on the saved trace is exactly what a rerun with that ``n_ts`` gives.
+        """
+        count = np.asarray(trace.diagnostics["count"], dtype=np.float64)
+        return [count >= v for v in values]
+
+    #: The model's backends, each built as ``(params, shape, dt)`` (Taichi: and ``arch``).
+    taichi_backend_type: ClassVar[type[TaichiLGMDBackend]]
+    numpy_backend_type: ClassVar[type]
+
+    def _setup(self) -> None:
+        self.dt = frame_interval_ms(self.fps)
+
+    def _taichi_backend(self, shape: tuple[int, int]) -> TaichiLGMDBackend:
+        return self.taichi_backend_type(self.params, shape, self.dt, self.arch)
+
+    def _numpy_backend(self, shape: tuple[int, int]) -> Any:
+        return self.numpy_backend_type(self.params, shape, self.dt)
+
+    def _reset_state(self) -> None:
+        self.pm = 0.0  # PM (LGMD2) or FFI (LGMD1 family), grey levels
+        self.k_prev = 0.0
+        self.kh_prev = 0.0
+        self.count = 0
+
+    def _track_pm(self, sum_p: float, n_cells: int, tau: float) -> float:
+        """``PM(t) = a mean|P| + (1 - a) PM(t-1)``, ``a = dt / (dt + tau)``: LGMD2's PM, LGMD1's FFI.
+
+        Updates and returns ``self.pm`` (grey levels); ``sum_p`` is ``sum |P|`` over ``n_cells`` pixels.
+        """
+        a = lowpass_coefficient(self.dt, tau)
+        self.pm = a * (sum_p / n_cells) + (1.0 - a) * self.pm
+        return self.pm
+
+    def _spikes(self, kh: float) -> tuple[int, bool]:
+        p = self.params
+        n = spike_count(kh, p.t_sp, p.c_sp)
+        self.count = 0 if n == 0 else self.count + n
+        return n, self.count >= p.n_ts
+
+    def _membrane(self, sum_g: float, n_cells: int) -> tuple[float, float]:
+        """``K = sigmoid(sum G / (N c_sig))`` and its SFA-adapted ``Kh``; updates the history."""
+        p = self.params
+        k = 1.0 / (1.0 + math.exp(-sum_g / (n_cells * p.c_sig)))
+        a_s = p.tau_sfa / (p.tau_sfa + self.dt)
+        kh = sfa_step(self.kh_prev, self.k_prev, k, p.t_sfa, a_s, p.kh_floor)
+        self.k_prev, self.kh_prev = k, kh
+        return k, kh
+
+
+@register_model
+class LGMD2(LGMDFamily):
+    """LGMD2 collision-perception network (Fu et al. 2020), selective to darker looming objects.
+
+    Parameters
+    ----------
+    params : LGMD2Params, optional
+    backend : {"taichi", "numpy"}
+        Taichi kernels (float32 layers) or the NumPy float64 reference.
+    arch : str
+        Taichi architecture.
+    fps : float
+        Input frame rate; ``dt = 1000 // fps`` ms.
+
+    Notes
+    -----
+    ``output`` is ``K`` (sigmoid membrane potential); ``spike`` is the
+    collision alert (spike count >= 8). Diagnostics per frame: ``Kh``
+    (after SFA), ``n`` (spikes), ``count``, ``PM``, ``w_on``, ``w_off``,
+    ``sum_G``, ``max_Ce``. :meth:`fields`: ``P, ON, OFF, I_on, I_off, S, Ce, G``.
+    """
+
+    name = "lgmd2"
+    params_type = LGMD2Params
+    description = "LGMD2 (Fu et al. 2020): biased ON/OFF, adaptive inhibition, SFA; equations from the authors' code"
+
+    taichi_backend_type = TaichiLGMD2Backend
+    numpy_backend_type = NumpyLGMD2Backend
+
+    def _step(self, t: int, grey: np.ndarray, sum_p: float) -> StepResult:
+        p = self.params
+        be = self._be
+        if t == 0:
+            return StepResult(t, 0.5, False, True, dict(Kh=p.kh_floor, n=0, count=0, PM=0.0,
+                                                        w_on=p.w_on_base, w_off=p.w_off_base,
+                                                        sum_G=0.0, max_Ce=0.0))
+        n_cells = grey.shape[0] * grey.shape[1]
+        self._track_pm(sum_p, n_cells, p.tau_pm)
+        w_on = max(self.pm / p.t_pm, p.w_on_base)
+        w_off = max(self.pm / p.t_pm, p.w_off_base)
+        sum_g, max_ce = be.layers(w_on, w_off)
+        k, kh = self._membrane(sum_g, n_cells)
+        n, alert = self._spikes(kh)
+        diag = dict(Kh=kh, n=n, count=self.count, PM=self.pm, w_on=w_on, w_off=w_off,
+                    sum_G=sum_g, max_Ce=max_ce)
+        return StepResult(t, k, alert, True, diag)

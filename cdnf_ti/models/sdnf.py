@@ -41,21 +41,24 @@ The reconstruction, per frame (grey ``L`` in [0, 1]):
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, replace
-from typing import Any, Sequence
+from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
 from ..baselines_reference import NumpySDNFBackend
-from ..params import THETA_SCALE, check_params, dog_radius, gaussian_profile, sigmoid, theta
+from ..params import THETA_SCALE, CDNFParams, ModelParams, check_params, dog_radius, gaussian_profile, sigmoid, theta
 from ..taichi_runtime import ensure_taichi
 from .base import Model, StepResult, Trace
 from .registry import register_model
 
 
 @dataclass(frozen=True)
-class SDNFParams:
+class SDNFParams(ModelParams):
     """SDNF parameters (RECONSTRUCTION; see the module docstring).
+
+    The values shared with C-DNF take their defaults from
+    :class:`~cdnf_ti.params.CDNFParams` (one source).
 
     Attributes
     ----------
@@ -64,7 +67,7 @@ class SDNFParams:
     h : float
         Resting level (0.2, own choice = C-DNF's).
     A, B : float
-        DoG amplitudes (3/2, 1/2; published).
+        DoG amplitudes (3/2, 1/2; published, and reused by C-DNF's Summation field).
     sigma_1 : float
         Excitatory spread (px, 1/3, as C-DNF's Summation field).
     sigma_2 : float or None
@@ -82,14 +85,14 @@ class SDNFParams:
     """
 
     t_b: float = 0.1
-    h: float = 0.2
-    A: float = 1.5
-    B: float = 0.5
-    sigma_1: float = 1.0 / 3.0
+    h: float = CDNFParams.h
+    A: float = CDNFParams.A
+    B: float = CDNFParams.B
+    sigma_1: float = CDNFParams.sigma_1
     sigma_2: float | None = None
     radius: int | None = None
     kappa: float = 10.0
-    epsilon: float = 0.006
+    epsilon: float = CDNFParams.epsilon
     delta: float = 0.0
     n_persist: int = 3
 
@@ -101,7 +104,8 @@ class SDNFParams:
         check_params("SDNFParams", [
             (0 < self.t_b <= 1, f"t_b must be in (0, 1], got {self.t_b}"),
             (self.sigma_1 > 0 and self.sigma_2 > 0, "sigma_1 and sigma_2 must be > 0"),
-            (int(self.radius) == self.radius and self.radius >= 1, f"radius must be a positive integer, got {self.radius}"),
+            (int(self.radius) == self.radius and self.radius >= 1,
+             f"radius must be a positive integer, got {self.radius}"),
             (self.A >= 0 and self.B >= 0, "A and B must be >= 0"),
             (self.kappa >= 0, f"kappa must be >= 0, got {self.kappa}"),
             (math.isfinite(self.h), f"h must be finite, got {self.h}"),
@@ -123,12 +127,6 @@ class SDNFParams:
     def threshold(self) -> float:
         """Static part of the alert threshold, ``0.5 + epsilon``."""
         return 0.5 + self.epsilon
-
-    def replace(self, **changes: Any) -> "SDNFParams":
-        return replace(self, **changes)
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
 
 def dynamic_threshold(p: SDNFParams, out: float, prev: float, run: int) -> tuple[float, int]:
