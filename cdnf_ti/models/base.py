@@ -218,15 +218,16 @@ class Model:
     :meth:`fields` and :meth:`run`. A model supplies only its equations and
     state through these hooks:
 
-    * :meth:`_taichi_backend` / :meth:`_numpy_backend` (required): build a
-      :class:`ModelBackend` for frames of a given shape;
+    * :meth:`_taichi_backend` / :meth:`_numpy_backend` (one for each name in
+      ``BACKENDS``): build a :class:`ModelBackend` for frames of a given shape;
     * :meth:`_step` (required): the equations of one frame, given what the
       backend's ``load`` returned;
     * :meth:`_reset_state` (optional): reset the model's scalar state;
     * :meth:`_setup` (optional): derived constants, once at construction;
-    * :meth:`_init_backend` (optional): prepare a new backend (e.g. solve a
-      resting state); :meth:`_reset_backend` (optional): return it to its
-      start (default ``backend.reset()``).
+    * :meth:`_init_backend` (optional): prepare a new backend before its
+      first frame (e.g. solve a resting state).
+
+    :meth:`reset` resets the model's state and calls the backend's ``reset``.
 
     Subclasses set ``name`` (registry key), ``output_name`` and
     ``params_type``, and are registered with
@@ -307,7 +308,7 @@ class Model:
         self._t = 0
         self._reset_state()
         if self._be is not None:
-            self._reset_backend(self._be)
+            self._be.reset()
 
     def fields(self) -> dict[str, np.ndarray]:
         """Copies of the model's inner layers/fields, each (H, W), for pictures (empty before a frame)."""
@@ -364,10 +365,6 @@ class Model:
 
     def _init_backend(self, backend: ModelBackend) -> None:
         """Prepare a new backend before its first frame (default: nothing to do)."""
-
-    def _reset_backend(self, backend: ModelBackend) -> None:
-        """Return ``backend`` to its state before the first frame."""
-        backend.reset()
 
     def run(self, frames: Iterable[np.ndarray], progress: bool | str = False, total: int | None = None) -> Trace:
         """Reset, then step through ``frames`` and return the :class:`Trace`.

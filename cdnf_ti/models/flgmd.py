@@ -47,7 +47,7 @@ from ..baselines_reference import NumpyFLGMDBackend
 from ..params import ModelParams, check_params, contrast_kernel
 from ..solver import solve_fixed_point
 from .lgmd1 import LGMD1, LGMD1Params, lgmd1_checks
-from .lgmd2 import TaichiLGMDBackend
+from .lgmd2 import TaichiLGMDBackend, lowpass_coefficient
 from .registry import register_model
 
 
@@ -140,7 +140,7 @@ class TaichiFLGMDBackend(TaichiLGMDBackend):
     def _setup(self) -> None:
         p, dt = self.params, self.dt
         self.on0, self.off0 = self._nd(), self._nd()
-        self.a = tuple(dt / (dt + t) for t in p.tau_lateral)
+        self.a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
         ge = p.excitation_kernel()
         self.ge = (float(ge[1, 1]), float(ge[0, 1]), float(ge[0, 0]))
 

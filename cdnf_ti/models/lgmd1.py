@@ -27,7 +27,7 @@ import numpy as np
 from ..baselines_reference import NumpyLGMD1Backend
 from ..params import ModelParams, check_params
 from .base import StepResult
-from .lgmd2 import LGMDFamily, TaichiLGMDBackend
+from .lgmd2 import LGMDFamily, TaichiLGMDBackend, lowpass_coefficient
 from .registry import register_model
 
 
@@ -109,7 +109,7 @@ class TaichiLGMD1Backend(TaichiLGMDBackend):
 
     def _setup(self) -> None:
         p, dt = self.params, self.dt
-        self.a = tuple(dt / (dt + t) for t in p.tau_lateral)
+        self.a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
 
     def layers(self) -> float:
         """ON/OFF, delayed spreads, S (thresholded), G; returns ``sum G``."""

@@ -29,14 +29,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Sequence
 
 import numpy as np
 
 from ..baselines_reference import NumpyLGMD2Backend
-from ..params import ModelParams, check_params
+from ..params import ModelParams, check_params, sigmoid
 from ..taichi_runtime import ensure_taichi
-from .base import Model, StepResult
+from .base import Model, StepResult, Trace
 from .registry import register_model
 
 
@@ -245,8 +245,8 @@ class TaichiLGMD2Backend(TaichiLGMDBackend):
 
     def _setup(self) -> None:
         p, dt = self.params, self.dt
-        self.an = tuple(dt / (dt + t) for t in p.tau_on)
-        self.af = tuple(dt / (dt + t) for t in p.tau_off)
+        self.an = tuple(lowpass_coefficient(dt, t) for t in p.tau_on)
+        self.af = tuple(lowpass_coefficient(dt, t) for t in p.tau_off)
 
     def layers(self, w_on: float, w_off: float) -> tuple[float, float]:
         """ON/OFF, delayed inhibition, S, grouping; returns ``(sum G, max |Ce|)``."""
@@ -281,7 +281,7 @@ class LGMDFamily(Model):
         return float(cls.params_type().n_ts)
 
     @classmethod
-    def sweep_alerts(cls, trace: Any, values: Any) -> list[np.ndarray]:
+    def sweep_alerts(cls, trace: Trace, values: Sequence[float]) -> list[np.ndarray]:
         """Alerts per frame at each count threshold, from the saved ``count`` diagnostic.
 
         The spike count does not depend on the threshold, so ``count >= n_ts``
@@ -327,7 +327,7 @@ class LGMDFamily(Model):
     def _membrane(self, sum_g: float, n_cells: int) -> tuple[float, float]:
         """``K = sigmoid(sum G / (N c_sig))`` and its SFA-adapted ``Kh``; updates the history."""
         p = self.params
-        k = 1.0 / (1.0 + math.exp(-sum_g / (n_cells * p.c_sig)))
+        k = sigmoid(sum_g / (n_cells * p.c_sig))
         a_s = p.tau_sfa / (p.tau_sfa + self.dt)
         kh = sfa_step(self.kh_prev, self.k_prev, k, p.t_sfa, a_s, p.kh_floor)
         self.k_prev, self.kh_prev = k, kh
