@@ -23,14 +23,15 @@ import cv2
 import numpy as np
 
 from ..models.cdnf import CDNF
-from ..params import THETA_SCALE, CDNFParams, contrast_kernel, dog_kernel, dog_profiles, resting_level
+from ..params import THETA_SCALE, CDNFParams, contrast_kernel, dog_kernel, dog_profiles, resting_levels
+from ..reference import RestingFields
 
 _SCIPY_MODE = {"replicate": "nearest", "reflect": "mirror", "zero": "constant"}
 _CV_BORDER = {"replicate": cv2.BORDER_REPLICATE, "reflect": cv2.BORDER_REFLECT_101,
               "zero": cv2.BORDER_CONSTANT}
 
 
-class _PeerBase:
+class _PeerBase(RestingFields):
     """State and the parts every peer shares (float32 fields, NumPy ufuncs)."""
 
     name = "peer"
@@ -44,24 +45,12 @@ class _PeerBase:
         self.P_on = np.zeros(self.shape, f)
         self.P_off = np.zeros(self.shape, f)
         self.S = np.zeros(self.shape, f)
-        g1, g2 = dog_profiles(params)
-        self.u0 = resting_level(params.h, 1.0)
-        self.v0 = resting_level(params.h, float(params.A * g1.sum() ** 2 - params.B * g2.sum() ** 2))
+        self.u0, self.v0 = resting_levels(params)
         self.u_on = np.full(self.shape, self.u0, f)
         self.u_off = np.full(self.shape, self.u0, f)
         self.v = np.full(self.shape, self.v0, f)
         self.tmp = np.zeros(self.shape, f)
         self.d = np.zeros(self.shape, f)
-        self._rest: tuple[np.ndarray, np.ndarray] | None = None
-
-    def save_rest(self) -> None:
-        self._rest = (self.u_on.copy(), self.v.copy())
-
-    def restore_rest(self) -> None:
-        u, v = self._rest
-        self.u_on[...] = u
-        self.u_off[...] = u
-        self.v[...] = v
 
     def load(self, grey: np.ndarray, first: bool) -> None:
         g = grey.astype(np.float32)
@@ -236,9 +225,5 @@ class PeerCDNF(CDNF):
         self.peer = peer
         self._peer_cls = peers[peer]
 
-    def _make_backend(self, shape: tuple[int, int]) -> None:
-        be = self._peer_cls(self.params, shape)
-        be.clear_input()
-        self._solve(be)
-        be.save_rest()
-        self._be = be
+    def _numpy_backend(self, shape: tuple[int, int]) -> "_PeerBase":
+        return self._peer_cls(self.params, shape)

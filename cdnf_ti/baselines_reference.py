@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from .params import vartheta
+from .reference import correlate, shifted_windows
 
 
 def eight_bit(grey: np.ndarray) -> np.ndarray:
@@ -66,13 +67,7 @@ def kernel_3x3(centre: float, edge: float, diag: float) -> np.ndarray:
 
 def correlate3(x: np.ndarray, k: np.ndarray) -> np.ndarray:
     """``sum_ij k(i, j) x(y + i, x + j)`` over a 3x3 window, replicate border."""
-    xp = np.pad(x, 1, mode="edge")
-    h, w = x.shape
-    out = np.zeros_like(x, dtype=np.float64)
-    for i in range(3):
-        for j in range(3):
-            out += k[i, j] * xp[i : i + h, j : j + w]
-    return out
+    return correlate(x, k, "replicate")
 
 
 def delayed_spread(x: np.ndarray, x_prev: np.ndarray, k: np.ndarray, alpha: np.ndarray) -> np.ndarray:
@@ -88,14 +83,11 @@ def delayed_spread(x: np.ndarray, x_prev: np.ndarray, k: np.ndarray, alpha: np.n
     k, alpha : ndarray, shape (3, 3)
         Weights ``K`` and mixing coefficients ``a = dt / (dt + tau)``.
     """
-    xp = np.pad(x, 1, mode="edge")
-    pp = np.pad(x_prev, 1, mode="edge")
-    h, w = x.shape
     out = np.zeros_like(x, dtype=np.float64)
-    for i in range(3):
-        for j in range(3):
-            a = alpha[i, j]
-            out += k[i, j] * (a * xp[i : i + h, j : j + w] + (1.0 - a) * pp[i : i + h, j : j + w])
+    now, before = shifted_windows(x, 1, "replicate"), shifted_windows(x_prev, 1, "replicate")
+    for (i, j, xw), (_, _, pw) in zip(now, before):
+        a = alpha[i, j]
+        out += k[i, j] * (a * xw + (1.0 - a) * pw)
     return out
 
 
@@ -293,21 +285,11 @@ class NumpySDNFBackend:
         self.E = (np.abs(self.P) >= self.params.t_b).astype(np.float64)
         return float(self.E.mean())
 
-    def _corr(self, x: np.ndarray, k: np.ndarray) -> np.ndarray:
-        r = k.shape[0] // 2
-        h, w = x.shape
-        xp = np.pad(x, r, mode="edge")
-        out = np.zeros_like(x)
-        for i in range(k.shape[0]):
-            for j in range(k.shape[1]):
-                out += k[i, j] * xp[i : i + h, j : j + w]
-        return out
-
     def update(self, b_t: float) -> float:
         """``u(t) = E - h + vartheta(W(t) (*) f(u(t-1)))``; returns ``mean f(u(t))``."""
         p = self.params
         f_prev = p.activation(self.u)
-        lat = p.A * self._corr(f_prev, self.g1o) - b_t * self._corr(f_prev, self.g2o)
+        lat = p.A * correlate(f_prev, self.g1o, "replicate") - b_t * correlate(f_prev, self.g2o, "replicate")
         self.u = self.E - p.h + vartheta(lat)
         return float(p.activation(self.u).mean())
 

@@ -14,12 +14,14 @@ with ``vartheta(a) = 2 / (1 + exp(-a)) - 1 = tanh(a / 2)`` and
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, replace
-from typing import Any
+from dataclasses import asdict, dataclass, replace
+from typing import Any, TypeVar
 
 import numpy as np
 
 BORDER_MODES = ("replicate", "reflect", "zero")
+
+P = TypeVar("P", bound="ModelParams")
 
 
 def vartheta(a: np.ndarray | float) -> np.ndarray | float:
@@ -51,8 +53,50 @@ def sigmoid(a: float) -> float:
     return 1.0 / (1.0 + math.exp(-a))
 
 
+def check_params(name: str, checks: list[tuple[bool, str]]) -> None:
+    """Raise ``ValueError("<name>: <message>")`` for the first failed check.
+
+    Parameters
+    ----------
+    name : str
+        The parameter class, named in the message (e.g. ``"CDNFParams"``).
+    checks : list of (bool, str)
+        ``(condition that must hold, message when it does not)``.
+    """
+    for ok, msg in checks:
+        if not ok:
+            raise ValueError(f"{name}: {msg}")
+
+
+def dog_radius(sigma_2: float) -> int:
+    """Default truncation radius ``ceil(3 sigma_2)`` (px) of a DoG with inhibitory spread ``sigma_2``."""
+    return int(math.ceil(3.0 * sigma_2 - 1e-9))
+
+
+def gaussian_profile(sigma: float, radius: int) -> np.ndarray:
+    """Unnormalised 1-D Gaussian ``g(d) = exp(-d^2 / (2 sigma^2))``, ``d = -radius..radius`` (px).
+
+    Returns
+    -------
+    ndarray, shape (2 radius + 1,), float64
+    """
+    d = np.arange(-int(radius), int(radius) + 1, dtype=np.float64)
+    return np.exp(-(d**2) / (2.0 * sigma**2))
+
+
+class ModelParams:
+    """Shared behaviour of the models' frozen parameter dataclasses."""
+
+    def replace(self: P, **changes: Any) -> P:
+        """Return a copy with some fields changed (validated)."""
+        return replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
 @dataclass(frozen=True)
-class CDNFParams:
+class CDNFParams(ModelParams):
     """Parameters of the C-DNF model (defaults from MODEL.md / the paper).
 
     Attributes
@@ -121,7 +165,7 @@ class CDNFParams:
         if self.sigma_2 is None:
             object.__setattr__(self, "sigma_2", 3.0 * self.sigma_1)
         if self.radius_s is None:
-            object.__setattr__(self, "radius_s", int(math.ceil(3.0 * self.sigma_2 - 1e-9)))
+            object.__setattr__(self, "radius_s", dog_radius(self.sigma_2))
         self.validate()
 
     def validate(self) -> None:
@@ -148,21 +192,12 @@ class CDNFParams:
             (self.alpha_on >= 0 and self.alpha_off >= 0,
              f"alpha_on/alpha_off must be >= 0, got {self.alpha_on}/{self.alpha_off}"),
         ]
-        for ok, msg in checks:
-            if not ok:
-                raise ValueError(f"CDNFParams: {msg}")
+        check_params("CDNFParams", checks)
 
     @property
     def threshold(self) -> float:
         """Alert threshold ``I_thre = 0.5 + epsilon``."""
         return 0.5 + self.epsilon
-
-    def replace(self, **changes: Any) -> "CDNFParams":
-        """Return a copy with some fields changed (validated)."""
-        return replace(self, **changes)
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
 
 def contrast_kernel(sigma_c: float) -> np.ndarray:
@@ -181,10 +216,7 @@ def dog_profiles(params: CDNFParams) -> tuple[np.ndarray, np.ndarray]:
         ``g_k(d) = exp(-d^2 / (2 sigma_k^2))`` for ``d = -R..R`` (unnormalised).
     """
     r = int(params.radius_s)
-    d = np.arange(-r, r + 1, dtype=np.float64)
-    g1 = np.exp(-(d**2) / (2.0 * params.sigma_1**2))
-    g2 = np.exp(-(d**2) / (2.0 * params.sigma_2**2))
-    return g1, g2
+    return gaussian_profile(params.sigma_1, r), gaussian_profile(params.sigma_2, r)
 
 
 def dog_kernel(params: CDNFParams) -> np.ndarray:
@@ -212,3 +244,16 @@ def resting_level(h: float, gain: float) -> float:
         if abs(step) < 1e-15:
             break
     return u
+
+
+def resting_levels(params: CDNFParams) -> tuple[float, float]:
+    """Uniform resting values ``(u*, v*)`` of the contrast fields and of the Summation field.
+
+    ``u*`` solves ``u = -h + vartheta(u)`` (``W_c`` sums to 1); ``v*`` solves
+    ``v = -h + vartheta(sum(W_s) v)`` with ``sum(W_s) = A (sum g1)^2 - B (sum g2)^2``.
+    This is the starting state of every backend before its resting state is
+    solved for the frame size and border (no input: ``S = 0`` since ``u* < 0``).
+    """
+    g1, g2 = dog_profiles(params)
+    gain_s = float(params.A * g1.sum() ** 2 - params.B * g2.sum() ** 2)
+    return resting_level(params.h, 1.0), resting_level(params.h, gain_s)

@@ -6,11 +6,34 @@ letter: direct 2-D correlations (no separable shortcut), ``np.tanh`` in float64.
 """
 from __future__ import annotations
 
+from typing import Iterator
+
 import numpy as np
 
-from .params import CDNFParams, contrast_kernel, dog_kernel, resting_level, theta, vartheta
+from .params import CDNFParams, contrast_kernel, dog_kernel, resting_levels, theta, vartheta
 
 _PAD_MODE = {"replicate": "edge", "reflect": "reflect", "zero": "constant"}
+
+
+def shifted_windows(x: np.ndarray, radius: int, border: str) -> Iterator[tuple[int, int, np.ndarray]]:
+    """Every shift of ``x`` within ``radius``: ``(i, j, window)`` with ``window = x(y + i - r, x + j - r)``.
+
+    The one loop behind every direct (non-separable) correlation of the NumPy
+    references.
+
+    Parameters
+    ----------
+    x : ndarray, shape (H, W)
+    radius : int
+        ``r``; ``i, j`` run over ``0..2r``.
+    border : {"replicate", "reflect", "zero"}
+        Values outside the frame.
+    """
+    h, w = x.shape
+    xp = np.pad(x, radius, mode=_PAD_MODE[border])
+    for i in range(2 * radius + 1):
+        for j in range(2 * radius + 1):
+            yield i, j, xp[i : i + h, j : j + w]
 
 
 def correlate(x: np.ndarray, kernel: np.ndarray, border: str) -> np.ndarray:
@@ -25,17 +48,34 @@ def correlate(x: np.ndarray, kernel: np.ndarray, border: str) -> np.ndarray:
     border : {"replicate", "reflect", "zero"}
         Values outside the frame.
     """
-    r = kernel.shape[0] // 2
-    h, w = x.shape
-    xp = np.pad(x, r, mode=_PAD_MODE[border])
     out = np.zeros_like(x, dtype=np.float64)
-    for i in range(kernel.shape[0]):
-        for j in range(kernel.shape[1]):
-            out += kernel[i, j] * xp[i : i + h, j : j + w]
+    for i, j, window in shifted_windows(x, kernel.shape[0] // 2, border):
+        out += kernel[i, j] * window
     return out
 
 
-class NumpyCDNFBackend:
+class RestingFields:
+    """The cold-start state of a C-DNF backend whose fields ``u_on``, ``u_off``, ``v`` are NumPy arrays."""
+
+    _rest: tuple[np.ndarray, np.ndarray] | None = None
+
+    def save_rest(self) -> None:
+        """Remember the current (resting) fields for cold starts."""
+        self._rest = (self.u_on.copy(), self.v.copy())
+
+    def restore_rest(self) -> None:
+        """Put all fields back to the remembered resting state."""
+        u, v = self._rest
+        self.u_on[...] = u
+        self.u_off[...] = u
+        self.v[...] = v
+
+    def reset(self) -> None:
+        """Back to the resting state (the :class:`~cdnf_ti.models.base.ModelBackend` contract)."""
+        self.restore_rest()
+
+
+class NumpyCDNFBackend(RestingFields):
     """C-DNF field state and updates in NumPy float64.
 
     Parameters
@@ -54,26 +94,13 @@ class NumpyCDNFBackend:
         self.w_s = dog_kernel(params)
         self.L = np.zeros(self.shape)
         self.P = np.zeros(self.shape)
-        u0 = resting_level(params.h, 1.0)
-        v0 = resting_level(params.h, float(self.w_s.sum()))
+        u0, v0 = resting_levels(params)
         self.u_on = np.full(self.shape, u0)
         self.u_off = np.full(self.shape, u0)
         self.v = np.full(self.shape, v0)
         self.S = np.zeros(self.shape)
-        self._rest: tuple[np.ndarray, np.ndarray] | None = None
 
     # -- state -----------------------------------------------------------
-    def save_rest(self) -> None:
-        """Remember the current (resting) fields for cold starts."""
-        self._rest = (self.u_on.copy(), self.v.copy())
-
-    def restore_rest(self) -> None:
-        """Put all fields back to the remembered resting state."""
-        u, v = self._rest
-        self.u_on[...] = u
-        self.u_off[...] = u
-        self.v[...] = v
-
     def load(self, grey: np.ndarray, first: bool) -> None:
         """Take a new frame: ``P = L(t) - L(t-1)`` (0 on the first frame).
 

@@ -4,12 +4,13 @@ A single published threshold may not transfer to other footage, so every
 model's alert level is swept over a range and the dataset re-scored from the
 saved traces (no re-run):
 
-* a model class that defines ``sweep_alerts(trace, values)`` (a classmethod
-  returning, per value, the first-alert frame or a boolean spike array over
-  frames) and, optionally, ``sweep_parameter`` (str) and ``sweep_values``
-  (sequence or a no-argument classmethod) is swept with its own rule;
-* C-DNF: the alert is ``I_v > 0.5 + epsilon`` and ``I_v`` does not depend on
-  ``epsilon``, so ``epsilon`` is swept from 0 to 0.02 on the saved ``I_v``;
+* a model class that satisfies :class:`~cdnf_ti.models.base.Sweepable`
+  (defines ``sweep_alerts(trace, values)``, a classmethod returning, per
+  value, the first-alert frame or a boolean spike array over frames, with
+  ``sweep_parameter``, ``sweep_values`` and ``sweep_default``) is swept with
+  its own rule. C-DNF's: the alert is ``I_v > 0.5 + epsilon`` and ``I_v`` does
+  not depend on ``epsilon``, so ``epsilon`` is swept from 0 to 0.02 on the
+  saved ``I_v``;
 * any other model falls back to thresholding its saved ``output``
   (``output > value``) over a data-driven range; the report says so.
 """
@@ -20,10 +21,11 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..models.base import Trace
+from ..models.base import Sweepable, Trace
+from ..models.cdnf import CDNF
 
 #: C-DNF's epsilon range (the issue: 0 to 0.02).
-CDNF_EPSILONS = tuple(float(x) for x in np.round(np.linspace(0.0, 0.02, 21), 6))
+CDNF_EPSILONS = tuple(CDNF.sweep_values)
 
 
 @dataclass(frozen=True)
@@ -39,8 +41,9 @@ class SweepSpec:
     default : float or None
         The model's default value of ``parameter`` (marked in plots).
     method : str
-        ``"model"`` (the class's ``sweep_alerts``), ``"cdnf-epsilon"`` or
-        ``"fallback"`` (threshold on the saved output).
+        ``"model"`` (the class's ``sweep_alerts``) or ``"fallback"``
+        (threshold on the saved output). ``"cdnf-epsilon"`` (older runs) is
+        C-DNF's own rule.
     """
 
     model: str
@@ -70,22 +73,15 @@ def sweep_spec(model: str, traces: Sequence[Trace] = (), n_values: int = 21) -> 
         Number of values in a fallback range.
     """
     cls = _class(model)
-    if hasattr(cls, "sweep_alerts"):
-        vals = getattr(cls, "sweep_values", None)
+    if isinstance(cls, Sweepable):
+        vals = cls.sweep_values
         if callable(vals):
             vals = vals()
-        param = getattr(cls, "sweep_parameter", "threshold")
-        default = getattr(cls, "sweep_default", None)
-        if callable(default):
-            default = default()
+        default = cls.sweep_default()
         if vals is None:
             vals = _fallback_values(traces, n_values, None)
-        return SweepSpec(cls.name, str(param), tuple(float(v) for v in vals),
+        return SweepSpec(cls.name, str(cls.sweep_parameter), tuple(float(v) for v in vals),
                          None if default is None else float(default), "model")
-    if cls.name == "cdnf":
-        from ..params import CDNFParams
-
-        return SweepSpec("cdnf", "epsilon", CDNF_EPSILONS, CDNFParams().epsilon, "cdnf-epsilon")
     default = None
     try:
         default = cls().threshold
@@ -120,10 +116,8 @@ def _first(spikes: np.ndarray) -> int | None:
 
 def sweep_first_alerts(spec: SweepSpec, trace: Trace) -> list[int | None]:
     """First-alert frame of ``trace`` at each of ``spec.values`` (None = never alerts)."""
-    out = np.asarray(trace.output, dtype=np.float64)
-    if spec.method == "cdnf-epsilon":
-        return [_first(out > 0.5 + v) for v in spec.values]
     if spec.method == "fallback":
+        out = np.asarray(trace.output, dtype=np.float64)
         return [_first(out > v) for v in spec.values]
     res = _class(spec.model).sweep_alerts(trace, list(spec.values))
     firsts: list[int | None] = []

@@ -1,46 +1,23 @@
-"""Model registry: every model behind one interface, looked up by name."""
+"""The looming models: every model behind one interface, registered by name.
+
+Each model is one module with a :class:`Model` subclass decorated with
+:func:`register_model`; importing this package registers the built-in ones
+(``--models all`` runs them in the order imported here).
+"""
 from __future__ import annotations
 
-from typing import Any
+from .base import Model, ModelBackend, NotConvergedWarning, StepResult, Sweepable, Trace
+from .registry import MODELS, create_model, get_model_class, register_model
 
-from .base import Model, NotConvergedWarning, StepResult, Trace
+# The built-in models, imported (so registered) in this order: C-DNF, Table I's comparison models, LGMD1.
+# isort: off
 from .cdnf import CDNF
-from .flgmd import FLGMDONn, FLGMDParams
-from .lgmd1 import LGMD1, LGMD1Params
-from .lgmd2 import LGMD2, LGMD2Params
 from .sdnf import SDNF, SDNFParams
+from .lgmd2 import LGMD2, LGMD2Params
+from .lgmd1 import LGMD1, LGMD1Params
+from .flgmd import FLGMDONn, FLGMDParams
+# isort: on
 
-MODELS: dict[str, type[Model]] = {}
-
-
-def register_model(cls: type[Model]) -> type[Model]:
-    """Add a :class:`Model` subclass to the registry under ``cls.name``."""
-    if not cls.name:
-        raise ValueError(f"{cls.__name__} has no registry name")
-    MODELS[cls.name] = cls
-    return cls
-
-
-def get_model_class(name: str) -> type[Model]:
-    """Look a model up by name (case-insensitive; ``-``/``_`` ignored)."""
-    key = name.lower().replace("-", "").replace("_", "")
-    for k, cls in MODELS.items():
-        if k.replace("_", "").replace("-", "") == key:
-            return cls
-    raise ValueError(f"unknown model {name!r}; available: {', '.join(MODELS)}")
-
-
-def create_model(name: str, params: Any = None, **kwargs: Any) -> Model:
-    """Instantiate a registered model: ``create_model("cdnf", backend="numpy")``."""
-    return get_model_class(name)(params, **kwargs)
-
-
-register_model(CDNF)
-register_model(SDNF)
-register_model(LGMD2)
-register_model(FLGMDONn)
-register_model(LGMD1)
-
-__all__ = ["MODELS", "Model", "StepResult", "Trace", "NotConvergedWarning", "CDNF",
+__all__ = ["MODELS", "Model", "ModelBackend", "Sweepable", "StepResult", "Trace", "NotConvergedWarning", "CDNF",
            "register_model", "get_model_class", "create_model",
            "LGMD2", "LGMD2Params", "LGMD1", "LGMD1Params", "SDNF", "SDNFParams", "FLGMDONn", "FLGMDParams"]

@@ -1,17 +1,25 @@
-"""The interface every looming model implements: parameters, step, run, reset, fields."""
+"""The interface every looming model implements, and the skeleton that runs it.
+
+:class:`Model` owns the per-frame skeleton (backend creation, frame
+preparation and size check, ``step``/``reset``/``fields``/``run``); a model
+supplies its equations and state through hooks. :class:`ModelBackend` and
+:class:`Sweepable` are the backend and threshold-sweep contracts, written as
+:class:`typing.Protocol`.
+"""
 from __future__ import annotations
 
 import csv
 import io
 import time
 import warnings
-from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Iterable
+from typing import Any, ClassVar, Iterable, Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
 from ..atomic import atomic_write_text
+from ..frames import to_grey
+from ..taichi_runtime import ensure_taichi
 
 
 class NotConvergedWarning(RuntimeWarning):
@@ -137,11 +145,95 @@ class Trace:
                    cols["converged"].astype(bool), diag)
 
 
-class Model(ABC):
+@runtime_checkable
+class ModelBackend(Protocol):
+    """What a model's execution backend provides: the per-pixel state for one frame size.
+
+    A model builds its backend at the first frame (:meth:`Model._taichi_backend`
+    or :meth:`Model._numpy_backend`). Beyond these members, the backends of one
+    model share its own stage methods (e.g. C-DNF's ``contrast_iterate``), which
+    only that model's :meth:`Model._step` calls.
+
+    Attributes
+    ----------
+    name : str
+        ``"taichi"`` or ``"numpy"``.
+    shape : (H, W)
+        Frame size in pixels.
+    """
+
+    name: str
+    shape: tuple[int, ...]
+
+    def load(self, grey: np.ndarray, first: bool) -> Any:
+        """Take the next frame (H, W; uint8 or float in [0, 1]); ``first``: no previous frame.
+
+        Returns what the model's equations need from the input stage
+        (e.g. ``sum |P|``), or None.
+        """
+
+    def reset(self) -> None:
+        """Return to the state before the first frame."""
+
+    def fields(self) -> dict[str, np.ndarray]:
+        """The inner layers, (H, W) each."""
+
+
+@runtime_checkable
+class Sweepable(Protocol):
+    """The threshold-sweep contract of :mod:`cdnf_ti.experiments.sweep`.
+
+    A model class whose alert rule can be replayed on a saved :class:`Trace` at
+    other threshold values (no re-run) provides these. :class:`Model` gives
+    defaults for all but :meth:`sweep_alerts`, so a model is swept with its own
+    rule exactly when it defines ``sweep_alerts``; otherwise the sweep
+    thresholds its saved ``output``.
+
+    Attributes
+    ----------
+    sweep_parameter : str
+        Name of the swept quantity, as shown in reports (``"threshold"``).
+    sweep_values : sequence of float or None
+        The values swept (None: a data-driven range over the saved outputs).
+    """
+
+    sweep_parameter: str
+    sweep_values: Sequence[float] | None
+
+    @classmethod
+    def sweep_default(cls) -> float | None:
+        """The model's default value of the swept quantity (marked in plots), or None."""
+
+    @classmethod
+    def sweep_alerts(cls, trace: Trace, values: Sequence[float]) -> Sequence[np.ndarray | int | None]:
+        """Per value: a boolean spike array over frames, or the first-alert frame (None or -1: never)."""
+
+
+class Model:
     """Base class of every looming-perception model in cdnf_ti.
 
-    Subclasses set ``name`` (registry key), ``output_name`` and ``params_type``
-    and implement :meth:`step`, :meth:`reset` and :meth:`fields`.
+    The base class runs the per-frame skeleton: backend creation at the first
+    frame (Taichi or NumPy), frame preparation (grey conversion, frame-size
+    check), loading the frame into the backend, frame counting, :meth:`reset`,
+    :meth:`fields` and :meth:`run`. A model supplies only its equations and
+    state through these hooks:
+
+    * :meth:`_taichi_backend` / :meth:`_numpy_backend` (one for each name in
+      ``BACKENDS``): build a :class:`ModelBackend` for frames of a given shape;
+    * :meth:`_step` (required): the equations of one frame, given what the
+      backend's ``load`` returned;
+    * :meth:`_reset_state` (optional): reset the model's scalar state;
+    * :meth:`_setup` (optional): derived constants, once at construction;
+    * :meth:`_init_backend` (optional): prepare a new backend before its
+      first frame (e.g. solve a resting state).
+
+    :meth:`reset` resets the model's state and calls the backend's ``reset``.
+
+    Subclasses set ``name`` (registry key), ``output_name`` and
+    ``params_type``, and are registered with
+    :func:`~cdnf_ti.models.registry.register_model` (a class decorator).
+    A model that needs a different per-frame flow may override :meth:`step`,
+    :meth:`reset` and :meth:`fields` instead.
 
     Parameters
     ----------
@@ -161,6 +253,15 @@ class Model(ABC):
     description: ClassVar[str] = ""
     BACKENDS: ClassVar[tuple[str, ...]] = ("taichi", "numpy")
 
+    #: Threshold sweep (:class:`Sweepable`): defaults; a model opts in by defining ``sweep_alerts``.
+    sweep_parameter: ClassVar[str] = "threshold"
+    sweep_values: ClassVar[Sequence[float] | None] = None
+
+    @classmethod
+    def sweep_default(cls) -> float | None:
+        """Default value of the swept quantity (None: unknown)."""
+        return None
+
     def __init__(self, params: Any = None, *, backend: str = "taichi", arch: str = "cpu", fps: float = 30.0):
         if backend not in self.BACKENDS:
             raise ValueError(f"{self.name}: unknown backend {backend!r}; choose one of {self.BACKENDS}")
@@ -173,23 +274,97 @@ class Model(ABC):
         self.arch = arch
         self.fps = float(fps)
         self._unconverged = 0
+        self._be: ModelBackend | None = None
+        self._t = 0
+        if backend == "taichi":
+            ensure_taichi(arch)
+        self._setup()
+        self._reset_state()
 
     @property
     def threshold(self) -> float | None:
         """Alert threshold on the continuous output, if the model has one."""
         return None
 
-    @abstractmethod
+    # -- the per-frame skeleton ------------------------------------------------
     def step(self, frame: np.ndarray) -> StepResult:
-        """Process one frame (2-D grey float in [0, 1] or uint8, or BGR uint8)."""
+        """Process one frame (2-D grey float in [0, 1] or uint8, or BGR uint8).
 
-    @abstractmethod
+        The frame is converted to grey, checked against the model's frame size
+        (fixed by the first frame), loaded into the backend, and handed to the
+        model's equations (:meth:`_step`).
+        """
+        grey = self._prepare(frame)
+        t = self._t
+        loaded = self._be.load(grey, t == 0)
+        self._t += 1
+        result = self._step(t, grey, loaded)
+        if not result.converged:
+            self._unconverged += 1
+        return result
+
     def reset(self) -> None:
         """Forget all state; the next frame is treated as the first."""
+        self._t = 0
+        self._reset_state()
+        if self._be is not None:
+            self._be.reset()
 
-    @abstractmethod
     def fields(self) -> dict[str, np.ndarray]:
-        """Copies of the model's inner layers/fields, each (H, W), for pictures."""
+        """Copies of the model's inner layers/fields, each (H, W), for pictures (empty before a frame)."""
+        if self._be is None:
+            return {}
+        return {k: np.asarray(v) for k, v in self._be.fields().items()}
+
+    def _prepare(self, frame: np.ndarray) -> np.ndarray:
+        """Grey (H, W) frame; builds the backend at the first frame, then checks the size."""
+        grey = to_grey(frame)
+        if self._be is None:
+            self._make_backend(grey.shape)
+        elif grey.shape != self._be.shape:
+            raise ValueError(f"frame {self._t} is {grey.shape[1]}x{grey.shape[0]} but this model runs at "
+                             f"{self._be.shape[1]}x{self._be.shape[0]}; call reset() on a new model")
+        return grey
+
+    def _make_backend(self, shape: tuple[int, int]) -> ModelBackend:
+        """Build the backend for frames of ``shape`` (H, W) and make it this model's."""
+        make = self._taichi_backend if self.backend_name == "taichi" else self._numpy_backend
+        backend = make(tuple(shape))
+        self._init_backend(backend)
+        self._be = backend
+        return backend
+
+    # -- hooks supplied by each model ---------------------------------------------
+    def _taichi_backend(self, shape: tuple[int, int]) -> ModelBackend:
+        """The Taichi backend for frames of ``shape`` (H, W)."""
+        raise NotImplementedError(f"{type(self).__name__} has no Taichi backend")
+
+    def _numpy_backend(self, shape: tuple[int, int]) -> ModelBackend:
+        """The NumPy float64 reference backend for frames of ``shape`` (H, W)."""
+        raise NotImplementedError(f"{type(self).__name__} has no NumPy backend")
+
+    def _step(self, t: int, grey: np.ndarray, loaded: Any) -> StepResult:
+        """The model's equations for frame ``t`` (0-based).
+
+        Parameters
+        ----------
+        t : int
+            Frame index; ``t == 0`` is the first frame since :meth:`reset`.
+        grey : ndarray, shape (H, W)
+            The grey frame (already loaded into ``self._be``).
+        loaded : Any
+            What the backend's ``load`` returned for it.
+        """
+        raise NotImplementedError(f"{type(self).__name__} defines no equations (_step)")
+
+    def _setup(self) -> None:
+        """Derived constants from ``params`` and ``fps``, once at construction (default: none)."""
+
+    def _reset_state(self) -> None:
+        """Reset the model's own (scalar) state; called at construction and by :meth:`reset`."""
+
+    def _init_backend(self, backend: ModelBackend) -> None:
+        """Prepare a new backend before its first frame (default: nothing to do)."""
 
     def run(self, frames: Iterable[np.ndarray], progress: bool | str = False, total: int | None = None) -> Trace:
         """Reset, then step through ``frames`` and return the :class:`Trace`.

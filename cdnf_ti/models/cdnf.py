@@ -6,13 +6,15 @@ float64). Convergence control: :mod:`cdnf_ti.solver`.
 """
 from __future__ import annotations
 
+from typing import Sequence
+
 import numpy as np
 
-from ..frames import to_grey
-from ..params import THETA_SCALE, CDNFParams, contrast_kernel, dog_profiles, resting_level, sigmoid
+from ..params import THETA_SCALE, CDNFParams, contrast_kernel, dog_profiles, resting_levels, sigmoid
 from ..reference import NumpyCDNFBackend
 from ..solver import SolveReport, solve_fixed_point
-from .base import Model, StepResult
+from .base import Model, ModelBackend, StepResult, Trace
+from .registry import register_model
 
 
 class TaichiCDNFBackend:
@@ -59,8 +61,7 @@ class TaichiCDNFBackend:
         self.g2 = ti.ndarray(ti.f32, g2.shape)
         self.g1.from_numpy(g1.astype(np.float32))
         self.g2.from_numpy(g2.astype(np.float32))
-        u0 = resting_level(params.h, 1.0)
-        v0 = resting_level(params.h, float(params.A * g1.sum() ** 2 - params.B * g2.sum() ** 2))
+        u0, v0 = resting_levels(params)
         for a in self.u_on + self.u_off:
             K.fill(a, u0)
         for a in self.v:
@@ -74,6 +75,10 @@ class TaichiCDNFBackend:
         self.K.copy(self.rest_u, self.u_on[self.c])
         self.K.copy(self.rest_u, self.u_off[self.c])
         self.K.copy(self.rest_v, self.v[self.s])
+
+    def reset(self) -> None:
+        """Back to the resting state (the :class:`~cdnf_ti.models.base.ModelBackend` contract)."""
+        self.restore_rest()
 
     def load(self, grey: np.ndarray, first: bool) -> None:
         scale = 1.0 / 255.0 if grey.dtype == np.uint8 else 1.0
@@ -215,8 +220,7 @@ class LaneTaichiCDNFBackend:
         g1, g2 = dog_profiles(params)
         self._sum_kernel = K.lanes_summation_kernel(tuple(float(x) for x in g1.astype(np.float32)),
                                                     tuple(float(x) for x in g2.astype(np.float32)))
-        self.u0 = resting_level(params.h, 1.0)
-        self.v0 = resting_level(params.h, float(params.A * g1.sum() ** 2 - params.B * g2.sum() ** 2))
+        self.u0, self.v0 = resting_levels(params)
         self.c = 0
         self.s = 0
         self._saved: dict[str, np.ndarray] | None = None
@@ -281,6 +285,10 @@ class LaneTaichiCDNFBackend:
         ws.v[self.s].from_numpy(v)
         ws.all_active()
 
+    def reset(self) -> None:
+        """Back to the resting state (the :class:`~cdnf_ti.models.base.ModelBackend` contract)."""
+        self.restore_rest()
+
     def load(self, grey: np.ndarray, first: bool) -> None:
         ws = self._acquire()
         scale = 1.0 / 255.0 if grey.dtype == np.uint8 else 1.0
@@ -339,6 +347,7 @@ class LaneTaichiCDNFBackend:
         }
 
 
+@register_model
 class CDNF(Model):
     """Contrast-based Dynamic Neural Field (Qin, Fu, Peng, Yue).
 
@@ -362,6 +371,7 @@ class CDNF(Model):
     With the Taichi backend, frames at least 32 px wide run on the lane-vectorised
     kernels with active tiles (:class:`LaneTaichiCDNFBackend`); set ``fast = False``
     on the instance before its first frame to use the generic ndarray kernels.
+    :meth:`fields`: ``u_on, u_off, v`` (the three fields) and ``P`` (luminance change).
 
     Examples
     --------
@@ -377,33 +387,38 @@ class CDNF(Model):
     #: Use the lane-vectorised kernels where the frame allows (False: the generic ndarray kernels).
     fast: bool = True
 
-    def __init__(self, params: CDNFParams | None = None, *, backend: str = "taichi", arch: str = "cpu",
-                 fps: float = 30.0):
-        super().__init__(params, backend=backend, arch=arch, fps=fps)
-        self._be: TaichiCDNFBackend | NumpyCDNFBackend | None = None
-        self._t = 0
-        if backend == "taichi":
-            from ..taichi_runtime import ensure_taichi
+    #: Threshold sweep (:class:`~cdnf_ti.models.base.Sweepable`): epsilon from 0 to 0.02.
+    sweep_parameter = "epsilon (alert I_v > 0.5 + value)"
+    sweep_values = tuple(float(x) for x in np.round(np.linspace(0.0, 0.02, 21), 6))
 
-            ensure_taichi(arch)
+    @classmethod
+    def sweep_default(cls) -> float:
+        return float(cls.params_type().epsilon)
+
+    @classmethod
+    def sweep_alerts(cls, trace: Trace, values: Sequence[float]) -> list[np.ndarray]:
+        """Alerts per frame at each ``epsilon``: ``I_v`` does not depend on it, so
+        ``I_v > 0.5 + epsilon`` on the saved trace is exactly what a rerun gives."""
+        out = np.asarray(trace.output, dtype=np.float64)
+        return [out > cls.params_type(epsilon=float(v)).threshold for v in values]
 
     @property
     def threshold(self) -> float:
         return self.params.threshold
 
-    def _make_backend(self, shape: tuple[int, int]) -> None:
-        p = self.params
-        if self.backend_name == "taichi" and self.fast and LaneTaichiCDNFBackend.supports(p, shape):
-            be = LaneTaichiCDNFBackend(p, shape, self.arch)
-        elif self.backend_name == "taichi":
-            be = TaichiCDNFBackend(p, shape, self.arch)
-        else:
-            be = NumpyCDNFBackend(p, shape)
+    def _taichi_backend(self, shape: tuple[int, int]) -> TaichiCDNFBackend | LaneTaichiCDNFBackend:
+        if self.fast and LaneTaichiCDNFBackend.supports(self.params, shape):
+            return LaneTaichiCDNFBackend(self.params, shape, self.arch)
+        return TaichiCDNFBackend(self.params, shape, self.arch)
+
+    def _numpy_backend(self, shape: tuple[int, int]) -> NumpyCDNFBackend:
+        return NumpyCDNFBackend(self.params, shape)
+
+    def _init_backend(self, be: ModelBackend) -> None:
         # The resting state for this frame size and border: the solution with no input.
         be.clear_input()
         self._solve(be)
         be.save_rest()
-        self._be = be
 
     def _solve(self, be) -> tuple[SolveReport, SolveReport]:
         p = self.params
@@ -413,29 +428,14 @@ class CDNF(Model):
         rs = solve_fixed_point(be.summation_iterate, 1, damping=p.damping, **kw)
         return rc, rs
 
-    def reset(self) -> None:
-        self._t = 0
-        if self._be is not None:
-            self._be.restore_rest()
-
-    def step(self, frame: np.ndarray) -> StepResult:
-        """Process one frame; see :class:`StepResult`.
+    def _step(self, t: int, grey: np.ndarray, loaded: None) -> StepResult:
+        """The equations of one frame; see :class:`StepResult`.
 
         Diagnostics: ``iterations_on/off/sum``, ``residual_on/off/sum``,
         ``damping_sum`` (the relaxation in force at the end of the Summation solve).
         """
-        grey = to_grey(frame)
-        if self._be is None:
-            self._make_backend(grey.shape)
-        elif grey.shape != self._be.shape:
-            raise ValueError(f"frame {self._t} is {grey.shape[1]}x{grey.shape[0]} but this model runs at "
-                             f"{self._be.shape[1]}x{self._be.shape[0]}; call reset() on a new model")
         be = self._be
-        first = self._t == 0
-        be.load(grey, first)
-        t = self._t
-        self._t += 1
-        if first:
+        if t == 0:
             be.restore_rest()
             diag = dict(iterations_on=0, iterations_off=0, iterations_sum=0,
                         residual_on=0.0, residual_off=0.0, residual_sum=0.0, damping_sum=1.0)
@@ -445,17 +445,9 @@ class CDNF(Model):
         rc, rs = self._solve(be)
         i_v = sigmoid(be.mean_activation())
         converged = rc.converged and rs.converged
-        if not converged:
-            self._unconverged += 1
         diag = dict(
             iterations_on=rc.iterations[0], iterations_off=rc.iterations[1], iterations_sum=rs.iterations[0],
             residual_on=rc.residuals[0], residual_off=rc.residuals[1], residual_sum=rs.residuals[0],
             damping_sum=rs.damping,
         )
         return StepResult(t, i_v, bool(i_v > self.params.threshold), converged, diag)
-
-    def fields(self) -> dict[str, np.ndarray]:
-        """The ON, OFF and Summation fields and the luminance change, (H, W) each."""
-        if self._be is None:
-            return {}
-        return self._be.fields()

@@ -39,19 +39,20 @@ The reconstruction, per frame (grey levels 0..255, ``dt = 1000 // fps``):
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 
-from ..params import contrast_kernel
+from ..baselines_reference import NumpyFLGMDBackend
+from ..params import ModelParams, check_params, contrast_kernel
 from ..solver import solve_fixed_point
-from .lgmd1 import LGMD1
-from .lgmd2 import TaichiLGMDBackend, _checks
+from .lgmd1 import LGMD1, LGMD1Params, lgmd1_checks
+from .lgmd2 import TaichiLGMDBackend, lowpass_coefficient
+from .registry import register_model
 
 
 @dataclass(frozen=True)
-class FLGMDParams:
+class FLGMDParams(ModelParams):
     """F-LGMD ONn parameters (RECONSTRUCTION; see the module docstring).
 
     Attributes
@@ -65,7 +66,7 @@ class FLGMDParams:
         Inhibition weights (0.5, LGMD1's ON value; OFF: own choice).
     tau_ffi, t_ffi, clip, dc, k_lateral, tau_lateral, t_s, c_sig,
     tau_sfa, t_sfa, kh_floor, t_sp, c_sp, n_ts :
-        As :class:`~cdnf_ti.models.lgmd1.LGMD1Params`.
+        As :class:`~cdnf_ti.models.lgmd1.LGMD1Params` (defaults taken from it).
     tol : float
         Fixed-point tolerance on ``max |T(X) - X|`` (grey levels, 1e-3; own choice).
     max_iter : int
@@ -77,22 +78,22 @@ class FLGMDParams:
     beta_on: float = -0.5
     beta_off: float = 0.0
     sigma_e: float = 1.0
-    w_i_on: float = 0.5
+    w_i_on: float = LGMD1Params.w_i_on
     w_i_off: float = 0.5
-    tau_ffi: float = 90.0
-    t_ffi: float = 8.0
-    clip: float = 0.1
-    dc: float = 0.1
-    k_lateral: tuple[float, float] = (0.25, 0.125)
-    tau_lateral: tuple[float, float] = (30.0, 60.0)
-    t_s: float = 30.0
-    c_sig: float = 1.0
-    tau_sfa: float = 500.0
-    t_sfa: float = 0.005
-    kh_floor: float = 0.5
-    t_sp: float = 0.78
-    c_sp: float = 4.0
-    n_ts: int = 8
+    tau_ffi: float = LGMD1Params.tau_ffi
+    t_ffi: float = LGMD1Params.t_ffi
+    clip: float = LGMD1Params.clip
+    dc: float = LGMD1Params.dc
+    k_lateral: tuple[float, float] = LGMD1Params.k_lateral
+    tau_lateral: tuple[float, float] = LGMD1Params.tau_lateral
+    t_s: float = LGMD1Params.t_s
+    c_sig: float = LGMD1Params.c_sig
+    tau_sfa: float = LGMD1Params.tau_sfa
+    t_sfa: float = LGMD1Params.t_sfa
+    kh_floor: float = LGMD1Params.kh_floor
+    t_sp: float = LGMD1Params.t_sp
+    c_sp: float = LGMD1Params.c_sp
+    n_ts: int = LGMD1Params.n_ts
     tol: float = 1e-3
     max_iter: int = 100
     damping: float = 1.0
@@ -100,26 +101,19 @@ class FLGMDParams:
     stall_patience: int = 4
 
     def __post_init__(self) -> None:
-        _checks("FLGMDParams", [
+        check_params("FLGMDParams", lgmd1_checks(self) + [
             (self.sigma_e > 0, f"sigma_e must be > 0, got {self.sigma_e}"),
             (self.w_i_on >= 0 and self.w_i_off >= 0, "w_i_on/w_i_off must be >= 0"),
-            (len(self.k_lateral) == 2 and len(self.tau_lateral) == 2,
-             "k_lateral/tau_lateral must be (edge, diagonal)"),
             (all(k >= 0 for k in self.k_lateral), "k_lateral weights must be >= 0"),
-            (all(t >= 0 for t in self.tau_lateral), "tau_lateral must be >= 0 ms"),
             (self.contraction("on") < 1.0,
              f"beta_on={self.beta_on} breaks the contraction bound |beta| (1 + w_i sum K) < 1 "
              f"(got {self.contraction('on'):.3f}); the feedback fixed point is not guaranteed"),
             (self.contraction("off") < 1.0,
              f"beta_off={self.beta_off} breaks the contraction bound |beta| (1 + w_i sum K) < 1 "
              f"(got {self.contraction('off'):.3f}); the feedback fixed point is not guaranteed"),
-            (0 <= self.dc < 1, f"dc must be in [0, 1), got {self.dc}"),
-            (self.c_sig > 0, f"c_sig must be > 0, got {self.c_sig}"),
-            (self.tau_sfa > 0, f"tau_sfa must be > 0 ms, got {self.tau_sfa}"),
             (self.tol > 0, f"tol must be > 0, got {self.tol}"),
             (int(self.max_iter) == self.max_iter and self.max_iter >= 1, "max_iter must be a positive integer"),
             (0 < self.min_damping <= self.damping <= 1, "need 0 < min_damping <= damping <= 1"),
-            (int(self.n_ts) == self.n_ts and self.n_ts >= 1, f"n_ts must be a positive integer, got {self.n_ts}"),
         ])
 
     def contraction(self, channel: str = "on") -> float:
@@ -135,13 +129,59 @@ class FLGMDParams:
         """The 3x3 normalised Gaussian ``G_e``, shape (3, 3)."""
         return contrast_kernel(self.sigma_e)
 
-    def replace(self, **changes: Any) -> "FLGMDParams":
-        return replace(self, **changes)
 
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+class TaichiFLGMDBackend(TaichiLGMDBackend):
+    """F-LGMD layers in Taichi (see :class:`FLGMDONn`): feedback iteration on the ON/OFF channels."""
+
+    LAYERS = ("S_on", "S_off", "S", "G")
+    #: Current, previous (settled) and scratch buffers per channel.
+    CHANNEL_BUFFERS = 3
+
+    def _setup(self) -> None:
+        p, dt = self.params, self.dt
+        self.on0, self.off0 = self._nd(), self._nd()
+        self.a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
+        ge = p.excitation_kernel()
+        self.ge = (float(ge[1, 1]), float(ge[0, 1]), float(ge[0, 0]))
+
+    def reset(self) -> None:
+        super().reset()
+        self.pi = 1  # index of the previous (settled) buffers
+        self.ni = 2  # scratch buffers
+
+    def prepare(self) -> None:
+        # the settled current buffers become the previous ones
+        self.pi, self.c = self.c, self.pi
+        p = self.params
+        self.K.flgmd_prepare(self.P, self.on0, self.off0, self.on[self.c], self.off[self.c],
+                             self.on[self.pi], self.off[self.pi], p.clip, p.dc, self.blocks)
+
+    def feedback_iterate(self, lam: float) -> tuple[float, float]:
+        p = self.params
+        c, n, q = self.c, self.ni, self.pi
+        with_off = p.beta_off != 0.0
+        r = self.K.flgmd_iterate(self.on0, self.off0, self.on[c], self.off[c], self.on[q], self.off[q],
+                                 self.on[n], self.off[n], *self.ge, *p.k_lateral, *self.a,
+                                 p.w_i_on, p.w_i_off, p.beta_on, p.beta_off, lam, self.blocks, with_off)
+        if with_off:
+            self.c, self.ni = n, c
+        else:
+            # only ON was iterated: swap the ON buffers, keep OFF in place
+            self.on[c], self.on[n] = self.on[n], self.on[c]
+        return float(r[0]), float(r[1])
+
+    def finish(self) -> float:
+        p = self.params
+        c, q = self.c, self.pi
+        return float(self.K.flgmd_finish(self.on[c], self.off[c], self.on[q], self.off[q], self.S_on, self.S_off,
+                                         self.S, self.G, *self.ge, *p.k_lateral, *self.a, p.w_i_on, p.w_i_off,
+                                         p.t_s, self.blocks))
+
+    def hold(self) -> None:
+        """FFI-held frame: the channels keep their previous values (nothing to do)."""
 
 
+@register_model
 class FLGMDONn(LGMD1):
     """F-LGMD ONn (after Chang et al. 2023) -- a documented RECONSTRUCTION.
 
@@ -168,12 +208,8 @@ class FLGMDONn(LGMD1):
     description = ("F-LGMD ONn (after Chang et al. 2023): LGMD with instant negative ON feedback "
                    "solved as a fixed point -- RECONSTRUCTION")
 
-    def _make_backend(self, shape: tuple[int, int]) -> Any:
-        if self.backend_name == "taichi":
-            return TaichiLGMDBackend(self.params, shape, self.dt, "flgmd", self.arch)
-        from ..baselines_reference import NumpyFLGMDBackend
-
-        return NumpyFLGMDBackend(self.params, shape, self.dt)
+    taichi_backend_type = TaichiFLGMDBackend
+    numpy_backend_type = NumpyFLGMDBackend
 
     def _diag0(self) -> dict[str, float]:
         d = super()._diag0()
@@ -189,8 +225,6 @@ class FLGMDONn(LGMD1):
         be.prepare()
         rep = solve_fixed_point(be.feedback_iterate, 2, tol=p.tol, max_iter=p.max_iter, damping=p.damping,
                                 min_damping=p.min_damping, stall_patience=p.stall_patience)
-        if not rep.converged:
-            self._unconverged += 1
         sum_g = be.finish()
         extra = dict(iterations=max(rep.iterations), residual_on=rep.residuals[0], residual_off=rep.residuals[1])
         return sum_g, extra, rep.converged

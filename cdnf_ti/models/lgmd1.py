@@ -19,17 +19,20 @@ authors' general LGMD code (``LGMDs.cs``). Differences from LGMD2
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from ..baselines_reference import NumpyLGMD1Backend
+from ..params import ModelParams, check_params
 from .base import StepResult
-from .lgmd2 import LGMDFamily, TaichiLGMDBackend, _checks, lowpass_coefficient
+from .lgmd2 import LGMDFamily, TaichiLGMDBackend, lowpass_coefficient
+from .registry import register_model
 
 
 @dataclass(frozen=True)
-class LGMD1Params:
+class LGMD1Params(ModelParams):
     """LGMD1 parameters (defaults: BASELINES.md / the authors' ``LGMDs.cs``).
 
     Attributes
@@ -81,25 +84,44 @@ class LGMD1Params:
     n_ts: int = 8
 
     def __post_init__(self) -> None:
-        _checks("LGMD1Params", [
-            (self.tau_ffi >= 0, f"tau_ffi must be >= 0 ms, got {self.tau_ffi}"),
-            (self.t_ffi > 0, f"t_ffi must be > 0, got {self.t_ffi}"),
-            (len(self.k_lateral) == 2 and len(self.tau_lateral) == 2,
-             "k_lateral/tau_lateral must be (edge, diagonal)"),
-            (all(t >= 0 for t in self.tau_lateral), "tau_lateral must be >= 0 ms"),
-            (0 <= self.dc < 1, f"dc must be in [0, 1), got {self.dc}"),
-            (self.c_sig > 0, f"c_sig must be > 0, got {self.c_sig}"),
-            (self.tau_sfa > 0, f"tau_sfa must be > 0 ms, got {self.tau_sfa}"),
-            (int(self.n_ts) == self.n_ts and self.n_ts >= 1, f"n_ts must be a positive integer, got {self.n_ts}"),
-        ])
-
-    def replace(self, **changes: Any) -> "LGMD1Params":
-        return replace(self, **changes)
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        check_params("LGMD1Params", lgmd1_checks(self))
 
 
+def lgmd1_checks(p: LGMD1Params | Any) -> list[tuple[bool, str]]:
+    """The ``(condition, message)`` checks of LGMD1's parameters (also F-LGMD's, which builds on them)."""
+    return [
+        (p.tau_ffi >= 0, f"tau_ffi must be >= 0 ms, got {p.tau_ffi}"),
+        (p.t_ffi > 0, f"t_ffi must be > 0, got {p.t_ffi}"),
+        (len(p.k_lateral) == 2 and len(p.tau_lateral) == 2,
+         "k_lateral/tau_lateral must be (edge, diagonal)"),
+        (all(t >= 0 for t in p.tau_lateral), "tau_lateral must be >= 0 ms"),
+        (0 <= p.dc < 1, f"dc must be in [0, 1), got {p.dc}"),
+        (p.c_sig > 0, f"c_sig must be > 0, got {p.c_sig}"),
+        (p.tau_sfa > 0, f"tau_sfa must be > 0 ms, got {p.tau_sfa}"),
+        (int(p.n_ts) == p.n_ts and p.n_ts >= 1, f"n_ts must be a positive integer, got {p.n_ts}"),
+    ]
+
+
+class TaichiLGMD1Backend(TaichiLGMDBackend):
+    """LGMD1 layers in Taichi (see :class:`LGMD1`)."""
+
+    LAYERS = ("I_on", "E_off", "S", "G")
+
+    def _setup(self) -> None:
+        p, dt = self.params, self.dt
+        self.a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
+
+    def layers(self) -> float:
+        """ON/OFF, delayed spreads, S (thresholded), G; returns ``sum G``."""
+        p = self.params
+        c, q = self._next_buffers()
+        r = self.K.lgmd1_layers(self.P, self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.E_off,
+                                self.S, self.G, p.clip, p.dc, p.w_i_on, p.w_i_off, *p.k_lateral, *self.a,
+                                p.w_on_exc, p.w_off_exc, p.w_onoff, p.t_s, self.blocks)
+        return float(r)
+
+
+@register_model
 class LGMD1(LGMDFamily):
     """LGMD1 with ON/OFF pathways and SFA (Fu et al. 2018).
 
@@ -122,25 +144,15 @@ class LGMD1(LGMDFamily):
     params_type = LGMD1Params
     description = "LGMD1 with ON/OFF pathways and SFA (Fu et al. 2018); equations from the authors' code"
 
-    def _make_backend(self, shape: tuple[int, int]) -> Any:
-        if self.backend_name == "taichi":
-            return TaichiLGMDBackend(self.params, shape, self.dt, "lgmd1", self.arch)
-        from ..baselines_reference import NumpyLGMD1Backend
+    taichi_backend_type = TaichiLGMD1Backend
+    numpy_backend_type = NumpyLGMD1Backend
 
-        return NumpyLGMD1Backend(self.params, shape, self.dt)
-
-    def step(self, frame: np.ndarray) -> StepResult:
+    def _step(self, t: int, grey: np.ndarray, sum_p: float) -> StepResult:
         p = self.params
-        grey = self._frame(frame)
-        be = self._be
-        t = self._t
-        self._t += 1
-        sum_p = be.load(grey, t == 0)
         if t == 0:
             return StepResult(t, 0.5, False, True, self._diag0())
         n_cells = grey.shape[0] * grey.shape[1]
-        a = lowpass_coefficient(self.dt, p.tau_ffi)
-        self.pm = a * (sum_p / n_cells) + (1.0 - a) * self.pm
+        self._track_pm(sum_p, n_cells, p.tau_ffi)
         held = self.pm >= p.t_ffi
         extra: dict[str, float] = self._held_diag() if held else {}
         converged = True

@@ -28,13 +28,16 @@ base class :class:`LGMDFamily` that runs them identically for both backends.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, replace
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, ClassVar, Sequence
 
 import numpy as np
 
-from ..frames import to_grey
-from .base import Model, StepResult
+from ..baselines_reference import NumpyLGMD2Backend
+from ..params import ModelParams, check_params, sigmoid
+from ..taichi_runtime import ensure_taichi
+from .base import Model, StepResult, Trace
+from .registry import register_model
 
 
 def frame_interval_ms(fps: float) -> int:
@@ -79,14 +82,8 @@ def spike_count(kh: float, t_sp: float, c_sp: float) -> int:
     return int(math.floor(math.exp(c_sp * (kh - t_sp))))
 
 
-def _checks(name: str, checks: list[tuple[bool, str]]) -> None:
-    for ok, msg in checks:
-        if not ok:
-            raise ValueError(f"{name}: {msg}")
-
-
 @dataclass(frozen=True)
-class LGMD2Params:
+class LGMD2Params(ModelParams):
     """LGMD2 parameters (defaults: BASELINES.md / the authors' C# supplement).
 
     Attributes
@@ -151,7 +148,7 @@ class LGMD2Params:
     n_ts: int = 8
 
     def __post_init__(self) -> None:
-        _checks("LGMD2Params", [
+        check_params("LGMD2Params", [
             (self.tau_pm >= 0, f"tau_pm must be >= 0 ms, got {self.tau_pm}"),
             (self.t_pm > 0, f"t_pm must be > 0, got {self.t_pm}"),
             (len(self.k_on) == 3 and len(self.k_off) == 3, "k_on/k_off must be (centre, edge, diagonal)"),
@@ -164,19 +161,113 @@ class LGMD2Params:
             (int(self.n_ts) == self.n_ts and self.n_ts >= 1, f"n_ts must be a positive integer, got {self.n_ts}"),
         ])
 
-    def replace(self, **changes: Any) -> "LGMD2Params":
-        return replace(self, **changes)
 
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+class TaichiLGMDBackend:
+    """Layers of an LGMD-family model in Taichi ndarrays (float32), driven by :mod:`cdnf_ti.kernels.lgmd`.
+
+    The family's shared part: photoreceptors ``L``/``P``, the ON/OFF channel
+    buffers, ``load``, ``reset`` and ``fields``. Each model's subclass names its
+    own layers (``LAYERS``), sets its constants (:meth:`_setup`) and runs its
+    kernels.
+
+    Parameters
+    ----------
+    params : LGMD2Params, LGMD1Params or FLGMDParams
+    shape : (H, W)
+    dt : int
+        Frame interval (ms).
+    arch : str
+    """
+
+    name = "taichi"
+    #: The model's own layers besides ``P``, ``ON``, ``OFF`` (allocated here, listed by :meth:`fields`).
+    LAYERS: tuple[str, ...] = ()
+    #: Buffers per ON/OFF channel (current and previous frame).
+    CHANNEL_BUFFERS = 2
+
+    def __init__(self, params: Any, shape: tuple[int, int], dt: int, arch: str = "cpu"):
+        ensure_taichi(arch)
+        from ..kernels import lgmd as K
+        from ..kernels.common import COLUMN_BLOCKS
+
+        self.K = K
+        self.params = params
+        self.shape = tuple(shape)
+        self.blocks = COLUMN_BLOCKS
+        self.dt = dt
+        self._arrays: list[Any] = []
+        self.L, self.P = self._nd(), self._nd()
+        self.on = [self._nd() for _ in range(self.CHANNEL_BUFFERS)]
+        self.off = [self._nd() for _ in range(self.CHANNEL_BUFFERS)]
+        for layer in self.LAYERS:
+            setattr(self, layer, self._nd())
+        self._setup()
+        self.reset()
+
+    def _nd(self) -> Any:
+        """A new (H, W) float32 ndarray, zeroed by :meth:`reset`."""
+        import taichi as ti
+
+        a = ti.ndarray(ti.f32, self.shape)
+        self._arrays.append(a)
+        return a
+
+    def _setup(self) -> None:
+        """The model's constants (delay coefficients, kernels) and extra buffers."""
+
+    def reset(self) -> None:
+        for a in self._arrays:
+            self.K.fill(a, 0.0)
+        self.c = 0  # index of the current ON/OFF buffers
+
+    def load(self, grey: np.ndarray, first: bool) -> float:
+        scale = 1.0 if grey.dtype == np.uint8 else 255.0
+        return float(self.K.load_frame(grey, self.L, self.P, scale, int(first), self.blocks))
+
+    def _next_buffers(self) -> tuple[int, int]:
+        """Make the other ON/OFF buffers current: ``(current, previous)`` indices."""
+        c, q = 1 - self.c, self.c  # new current, previous
+        self.c = c
+        return c, q
+
+    def fields(self) -> dict[str, np.ndarray]:
+        c = self.c
+        out = {"P": self.P.to_numpy(), "ON": self.on[c].to_numpy(), "OFF": self.off[c].to_numpy()}
+        for k in self.LAYERS:
+            out[k] = getattr(self, k).to_numpy()
+        return out
+
+
+class TaichiLGMD2Backend(TaichiLGMDBackend):
+    """LGMD2 layers in Taichi (see :class:`LGMD2`)."""
+
+    LAYERS = ("I_on", "I_off", "S", "Ce", "G")
+
+    def _setup(self) -> None:
+        p, dt = self.params, self.dt
+        self.an = tuple(lowpass_coefficient(dt, t) for t in p.tau_on)
+        self.af = tuple(lowpass_coefficient(dt, t) for t in p.tau_off)
+
+    def layers(self, w_on: float, w_off: float) -> tuple[float, float]:
+        """ON/OFF, delayed inhibition, S, grouping; returns ``(sum G, max |Ce|)``."""
+        p = self.params
+        c, q = self._next_buffers()
+        r = self.K.lgmd2_layers(self.P, self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.I_off,
+                                self.S, self.Ce, self.G, p.clip, p.dc, w_on, w_off,
+                                *p.k_on, *self.an, *p.k_off, *self.af, p.w_on_exc, p.w_off_exc, p.w_onoff,
+                                p.delta_c, p.c_w, p.c_de, p.t_de, self.blocks)
+        return float(r[0]), float(r[1])
 
 
 class LGMDFamily(Model):
     """Shared orchestration of the LGMD family (both backends).
 
-    Subclasses implement :meth:`_make_backend` and :meth:`_layers` (the
-    per-pixel stages, returning ``sum G`` or ``None`` for a held frame).
-    Inputs are grey levels 0..255 (uint8 as is; float in [0, 1] times 255).
+    Subclasses supply their backends and equations (:class:`~cdnf_ti.models.base.Model`
+    hooks); the family shares the frame interval ``dt``, the scalar state
+    (PM/FFI, ``K``/``Kh`` history, spike count), the membrane/SFA step and the
+    spike count. Inputs are grey levels 0..255 (uint8 as is; float in [0, 1]
+    times 255). ``threshold`` is None: the alert is a spike count, not a level
+    of ``K`` (``Kh``/``n`` are diagnostics).
     """
 
     output_name = "K"
@@ -190,7 +281,7 @@ class LGMDFamily(Model):
         return float(cls.params_type().n_ts)
 
     @classmethod
-    def sweep_alerts(cls, trace: Any, values: Any) -> list[np.ndarray]:
+    def sweep_alerts(cls, trace: Trace, values: Sequence[float]) -> list[np.ndarray]:
         """Alerts per frame at each count threshold, from the saved ``count`` diagnostic.
 
         The spike count does not depend on the threshold, so ``count >= n_ts``
@@ -199,45 +290,33 @@ class LGMDFamily(Model):
         count = np.asarray(trace.diagnostics["count"], dtype=np.float64)
         return [count >= v for v in values]
 
-    def __init__(self, params: Any = None, *, backend: str = "taichi", arch: str = "cpu", fps: float = 30.0):
-        super().__init__(params, backend=backend, arch=arch, fps=fps)
+    #: The model's backends, each built as ``(params, shape, dt)`` (Taichi: and ``arch``).
+    taichi_backend_type: ClassVar[type[TaichiLGMDBackend]]
+    numpy_backend_type: ClassVar[type]
+
+    def _setup(self) -> None:
         self.dt = frame_interval_ms(self.fps)
-        self._be: Any = None
-        self._t = 0
-        if backend == "taichi":
-            from ..taichi_runtime import ensure_taichi
 
-            ensure_taichi(arch)
-        self._reset_scalars()
+    def _taichi_backend(self, shape: tuple[int, int]) -> TaichiLGMDBackend:
+        return self.taichi_backend_type(self.params, shape, self.dt, self.arch)
 
-    def _reset_scalars(self) -> None:
+    def _numpy_backend(self, shape: tuple[int, int]) -> Any:
+        return self.numpy_backend_type(self.params, shape, self.dt)
+
+    def _reset_state(self) -> None:
         self.pm = 0.0  # PM (LGMD2) or FFI (LGMD1 family), grey levels
         self.k_prev = 0.0
         self.kh_prev = 0.0
         self.count = 0
 
-    @property
-    def threshold(self) -> float | None:
-        """None: the alert is a spike count, not a level of ``K`` (``Kh``/``n`` are diagnostics)."""
-        return None
+    def _track_pm(self, sum_p: float, n_cells: int, tau: float) -> float:
+        """``PM(t) = a mean|P| + (1 - a) PM(t-1)``, ``a = dt / (dt + tau)``: LGMD2's PM, LGMD1's FFI.
 
-    def reset(self) -> None:
-        self._t = 0
-        self._reset_scalars()
-        if self._be is not None:
-            self._be.reset()
-
-    def _frame(self, frame: np.ndarray) -> np.ndarray:
-        grey = to_grey(frame)
-        if self._be is None:
-            self._be = self._make_backend(grey.shape)
-        elif grey.shape != self._be.shape:
-            raise ValueError(f"frame {self._t} is {grey.shape[1]}x{grey.shape[0]} but this model runs at "
-                             f"{self._be.shape[1]}x{self._be.shape[0]}; call reset() on a new model")
-        return grey
-
-    def _make_backend(self, shape: tuple[int, int]) -> Any:  # pragma: no cover - abstract
-        raise NotImplementedError
+        Updates and returns ``self.pm`` (grey levels); ``sum_p`` is ``sum |P|`` over ``n_cells`` pixels.
+        """
+        a = lowpass_coefficient(self.dt, tau)
+        self.pm = a * (sum_p / n_cells) + (1.0 - a) * self.pm
+        return self.pm
 
     def _spikes(self, kh: float) -> tuple[int, bool]:
         p = self.params
@@ -248,19 +327,14 @@ class LGMDFamily(Model):
     def _membrane(self, sum_g: float, n_cells: int) -> tuple[float, float]:
         """``K = sigmoid(sum G / (N c_sig))`` and its SFA-adapted ``Kh``; updates the history."""
         p = self.params
-        k = 1.0 / (1.0 + math.exp(-sum_g / (n_cells * p.c_sig)))
+        k = sigmoid(sum_g / (n_cells * p.c_sig))
         a_s = p.tau_sfa / (p.tau_sfa + self.dt)
         kh = sfa_step(self.kh_prev, self.k_prev, k, p.t_sfa, a_s, p.kh_floor)
         self.k_prev, self.kh_prev = k, kh
         return k, kh
 
-    def fields(self) -> dict[str, np.ndarray]:
-        """The model's inner layers, (H, W) each (empty before the first frame)."""
-        if self._be is None:
-            return {}
-        return {k: np.asarray(v) for k, v in self._be.fields().items()}
 
-
+@register_model
 class LGMD2(LGMDFamily):
     """LGMD2 collision-perception network (Fu et al. 2020), selective to darker looming objects.
 
@@ -286,27 +360,18 @@ class LGMD2(LGMDFamily):
     params_type = LGMD2Params
     description = "LGMD2 (Fu et al. 2020): biased ON/OFF, adaptive inhibition, SFA; equations from the authors' code"
 
-    def _make_backend(self, shape: tuple[int, int]) -> Any:
-        if self.backend_name == "taichi":
-            return TaichiLGMDBackend(self.params, shape, self.dt, "lgmd2", self.arch)
-        from ..baselines_reference import NumpyLGMD2Backend
+    taichi_backend_type = TaichiLGMD2Backend
+    numpy_backend_type = NumpyLGMD2Backend
 
-        return NumpyLGMD2Backend(self.params, shape, self.dt)
-
-    def step(self, frame: np.ndarray) -> StepResult:
+    def _step(self, t: int, grey: np.ndarray, sum_p: float) -> StepResult:
         p = self.params
-        grey = self._frame(frame)
         be = self._be
-        t = self._t
-        self._t += 1
-        sum_p = be.load(grey, t == 0)
         if t == 0:
             return StepResult(t, 0.5, False, True, dict(Kh=p.kh_floor, n=0, count=0, PM=0.0,
                                                         w_on=p.w_on_base, w_off=p.w_off_base,
                                                         sum_G=0.0, max_Ce=0.0))
         n_cells = grey.shape[0] * grey.shape[1]
-        a = lowpass_coefficient(self.dt, p.tau_pm)
-        self.pm = a * (sum_p / n_cells) + (1.0 - a) * self.pm
+        self._track_pm(sum_p, n_cells, p.tau_pm)
         w_on = max(self.pm / p.t_pm, p.w_on_base)
         w_off = max(self.pm / p.t_pm, p.w_off_base)
         sum_g, max_ce = be.layers(w_on, w_off)
@@ -315,132 +380,3 @@ class LGMD2(LGMDFamily):
         diag = dict(Kh=kh, n=n, count=self.count, PM=self.pm, w_on=w_on, w_off=w_off,
                     sum_G=sum_g, max_Ce=max_ce)
         return StepResult(t, k, alert, True, diag)
-
-
-class TaichiLGMDBackend:
-    """LGMD-family layers in Taichi ndarrays (float32), driven by :mod:`cdnf_ti.kernels.lgmd`.
-
-    Parameters
-    ----------
-    params : LGMD2Params, LGMD1Params or FLGMDParams
-    shape : (H, W)
-    dt : int
-        Frame interval (ms).
-    kind : {"lgmd2", "lgmd1", "flgmd"}
-    arch : str
-    """
-
-    name = "taichi"
-
-    def __init__(self, params: Any, shape: tuple[int, int], dt: int, kind: str, arch: str = "cpu"):
-        from ..taichi_runtime import ensure_taichi
-
-        ensure_taichi(arch)
-        import taichi as ti
-
-        from ..kernels import lgmd as K
-        from ..kernels.common import COLUMN_BLOCKS
-
-        self.K = K
-        self.params = params
-        self.shape = tuple(shape)
-        self.kind = kind
-        self.blocks = COLUMN_BLOCKS
-        self.dt = dt
-
-        self._arrays: list[Any] = []
-
-        def nd() -> Any:
-            a = ti.ndarray(ti.f32, self.shape)
-            self._arrays.append(a)
-            return a
-
-        self.L, self.P = nd(), nd()
-        p = params
-        if kind == "lgmd2":
-            self.on, self.off = [nd(), nd()], [nd(), nd()]
-            self.I_on, self.I_off, self.S, self.Ce, self.G = nd(), nd(), nd(), nd(), nd()
-            self.an = tuple(dt / (dt + t) for t in p.tau_on)
-            self.af = tuple(dt / (dt + t) for t in p.tau_off)
-        elif kind == "lgmd1":
-            self.on, self.off = [nd(), nd()], [nd(), nd()]
-            self.I_on, self.E_off, self.S, self.G = nd(), nd(), nd(), nd()
-            self.a = tuple(dt / (dt + t) for t in p.tau_lateral)
-        elif kind == "flgmd":
-            self.on, self.off = [nd(), nd(), nd()], [nd(), nd(), nd()]
-            self.on0, self.off0 = nd(), nd()
-            self.S_on, self.S_off, self.S, self.G = nd(), nd(), nd(), nd()
-            self.a = tuple(dt / (dt + t) for t in p.tau_lateral)
-            ge = p.excitation_kernel()
-            self.ge = (float(ge[1, 1]), float(ge[0, 1]), float(ge[0, 0]))
-        else:
-            raise ValueError(f"unknown LGMD kind {kind!r}")
-        self.reset()
-
-    def reset(self) -> None:
-        for a in self._arrays:
-            self.K.fill(a, 0.0)
-        self.c = 0  # index of the current ON/OFF buffers
-        self.pi = 1  # F-LGMD: index of the previous (settled) buffers
-        self.ni = 2  # F-LGMD: scratch buffers
-
-    def load(self, grey: np.ndarray, first: bool) -> float:
-        scale = 1.0 if grey.dtype == np.uint8 else 255.0
-        return float(self.K.load_frame(grey, self.L, self.P, scale, int(first), self.blocks))
-
-    # -- LGMD2 ------------------------------------------------------------
-    def layers(self, w_on: float | None = None, w_off: float | None = None) -> Any:
-        p = self.params
-        c, q = 1 - self.c, self.c  # new current, previous
-        self.c = c
-        if self.kind == "lgmd2":
-            r = self.K.lgmd2_layers(self.P, self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.I_off,
-                                    self.S, self.Ce, self.G, p.clip, p.dc, w_on, w_off,
-                                    *p.k_on, *self.an, *p.k_off, *self.af, p.w_on_exc, p.w_off_exc, p.w_onoff,
-                                    p.delta_c, p.c_w, p.c_de, p.t_de, self.blocks)
-            return float(r[0]), float(r[1])
-        r = self.K.lgmd1_layers(self.P, self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.E_off,
-                                self.S, self.G, p.clip, p.dc, p.w_i_on, p.w_i_off, *p.k_lateral, *self.a,
-                                p.w_on_exc, p.w_off_exc, p.w_onoff, p.t_s, self.blocks)
-        return float(r)
-
-    # -- F-LGMD -----------------------------------------------------------
-    def prepare(self) -> None:
-        # the settled current buffers become the previous ones
-        self.pi, self.c = self.c, self.pi
-        p = self.params
-        self.K.flgmd_prepare(self.P, self.on0, self.off0, self.on[self.c], self.off[self.c],
-                             self.on[self.pi], self.off[self.pi], p.clip, p.dc, self.blocks)
-
-    def feedback_iterate(self, lam: float) -> tuple[float, float]:
-        p = self.params
-        c, n, q = self.c, self.ni, self.pi
-        with_off = p.beta_off != 0.0
-        r = self.K.flgmd_iterate(self.on0, self.off0, self.on[c], self.off[c], self.on[q], self.off[q],
-                                 self.on[n], self.off[n], *self.ge, *p.k_lateral, *self.a,
-                                 p.w_i_on, p.w_i_off, p.beta_on, p.beta_off, lam, self.blocks, with_off)
-        if with_off:
-            self.c, self.ni = n, c
-        else:
-            # only ON was iterated: swap the ON buffers, keep OFF in place
-            self.on[c], self.on[n] = self.on[n], self.on[c]
-        return float(r[0]), float(r[1])
-
-    def finish(self) -> float:
-        p = self.params
-        c, q = self.c, self.pi
-        return float(self.K.flgmd_finish(self.on[c], self.off[c], self.on[q], self.off[q], self.S_on, self.S_off,
-                                         self.S, self.G, *self.ge, *p.k_lateral, *self.a, p.w_i_on, p.w_i_off,
-                                         p.t_s, self.blocks))
-
-    def hold(self) -> None:
-        """FFI-held frame: the channels keep their previous values (nothing to do)."""
-
-    def fields(self) -> dict[str, np.ndarray]:
-        c = self.c
-        out = {"P": self.P.to_numpy(), "ON": self.on[c].to_numpy(), "OFF": self.off[c].to_numpy()}
-        names = {"lgmd2": ("I_on", "I_off", "S", "Ce", "G"), "lgmd1": ("I_on", "E_off", "S", "G"),
-                 "flgmd": ("S_on", "S_off", "S", "G")}[self.kind]
-        for k in names:
-            out[k] = getattr(self, k).to_numpy()
-        return out

@@ -41,20 +41,24 @@ The reconstruction, per frame (grey ``L`` in [0, 1]):
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, replace
-from typing import Any
+from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
-from ..frames import to_grey
-from ..params import THETA_SCALE
-from .base import Model, StepResult
-from .lgmd2 import _checks
+from ..baselines_reference import NumpySDNFBackend
+from ..params import THETA_SCALE, CDNFParams, ModelParams, check_params, dog_radius, gaussian_profile, sigmoid, theta
+from ..taichi_runtime import ensure_taichi
+from .base import Model, StepResult, Trace
+from .registry import register_model
 
 
 @dataclass(frozen=True)
-class SDNFParams:
+class SDNFParams(ModelParams):
     """SDNF parameters (RECONSTRUCTION; see the module docstring).
+
+    The values shared with C-DNF take their defaults from
+    :class:`~cdnf_ti.params.CDNFParams` (one source).
 
     Attributes
     ----------
@@ -63,7 +67,7 @@ class SDNFParams:
     h : float
         Resting level (0.2, own choice = C-DNF's).
     A, B : float
-        DoG amplitudes (3/2, 1/2; published).
+        DoG amplitudes (3/2, 1/2; published, and reused by C-DNF's Summation field).
     sigma_1 : float
         Excitatory spread (px, 1/3, as C-DNF's Summation field).
     sigma_2 : float or None
@@ -81,14 +85,14 @@ class SDNFParams:
     """
 
     t_b: float = 0.1
-    h: float = 0.2
-    A: float = 1.5
-    B: float = 0.5
-    sigma_1: float = 1.0 / 3.0
+    h: float = CDNFParams.h
+    A: float = CDNFParams.A
+    B: float = CDNFParams.B
+    sigma_1: float = CDNFParams.sigma_1
     sigma_2: float | None = None
     radius: int | None = None
     kappa: float = 10.0
-    epsilon: float = 0.006
+    epsilon: float = CDNFParams.epsilon
     delta: float = 0.0
     n_persist: int = 3
 
@@ -96,11 +100,12 @@ class SDNFParams:
         if self.sigma_2 is None:
             object.__setattr__(self, "sigma_2", 3.0 * self.sigma_1)
         if self.radius is None:
-            object.__setattr__(self, "radius", int(math.ceil(3.0 * self.sigma_2 - 1e-9)))
-        _checks("SDNFParams", [
+            object.__setattr__(self, "radius", dog_radius(self.sigma_2))
+        check_params("SDNFParams", [
             (0 < self.t_b <= 1, f"t_b must be in (0, 1], got {self.t_b}"),
             (self.sigma_1 > 0 and self.sigma_2 > 0, "sigma_1 and sigma_2 must be > 0"),
-            (int(self.radius) == self.radius and self.radius >= 1, f"radius must be a positive integer, got {self.radius}"),
+            (int(self.radius) == self.radius and self.radius >= 1,
+             f"radius must be a positive integer, got {self.radius}"),
             (self.A >= 0 and self.B >= 0, "A and B must be >= 0"),
             (self.kappa >= 0, f"kappa must be >= 0, got {self.kappa}"),
             (math.isfinite(self.h), f"h must be finite, got {self.h}"),
@@ -111,24 +116,39 @@ class SDNFParams:
 
     def dog_profiles(self) -> tuple[np.ndarray, np.ndarray]:
         """1-D factors ``g_k(d) = exp(-d^2 / (2 sigma_k^2))``, ``d = -R..R`` (unnormalised)."""
-        d = np.arange(-self.radius, self.radius + 1, dtype=np.float64)
-        return np.exp(-(d**2) / (2.0 * self.sigma_1**2)), np.exp(-(d**2) / (2.0 * self.sigma_2**2))
+        return gaussian_profile(self.sigma_1, self.radius), gaussian_profile(self.sigma_2, self.radius)
 
     @staticmethod
     def activation(u: np.ndarray) -> np.ndarray:
-        """Firing rate ``f(u) = tanh([u]+) / tanh(1)``."""
-        return np.tanh(np.maximum(u, 0.0)) * THETA_SCALE
+        """Firing rate ``f(u) = theta([u]+) = tanh([u]+) / tanh(1)``."""
+        return theta(np.maximum(u, 0.0))
 
     @property
     def threshold(self) -> float:
         """Static part of the alert threshold, ``0.5 + epsilon``."""
         return 0.5 + self.epsilon
 
-    def replace(self, **changes: Any) -> "SDNFParams":
-        return replace(self, **changes)
 
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+def dynamic_threshold(p: SDNFParams, out: float, prev: float, run: int) -> tuple[float, int]:
+    """The dynamic-threshold rule of one frame.
+
+    Parameters
+    ----------
+    p : SDNFParams
+    out, prev : float
+        ``I(t)`` and ``I(t-1)``.
+    run : int
+        Consecutive frames above the threshold before this one.
+
+    Returns
+    -------
+    theta_d : float
+        ``max(0.5 + epsilon, I(t-1) + delta)``.
+    run : int
+        ``run + 1`` if ``I(t) > theta_d``, else 0; the alert is ``run >= n_persist``.
+    """
+    dyn = max(p.threshold, prev + p.delta)
+    return dyn, (run + 1 if out > dyn else 0)
 
 
 class TaichiSDNFBackend:
@@ -137,8 +157,6 @@ class TaichiSDNFBackend:
     name = "taichi"
 
     def __init__(self, params: SDNFParams, shape: tuple[int, int], arch: str = "cpu"):
-        from ..taichi_runtime import ensure_taichi
-
         ensure_taichi(arch)
         import taichi as ti
 
@@ -187,6 +205,7 @@ class TaichiSDNFBackend:
                 "activity": self.F[self.c].to_numpy()}
 
 
+@register_model
 class SDNF(Model):
     """Single-field DNF looming model (after Qin et al. 2024) -- a documented RECONSTRUCTION.
 
@@ -213,29 +232,14 @@ class SDNF(Model):
     params_type = SDNFParams
     description = "SDNF (after Qin et al. 2024): single DNF, binary input, delayed adaptive DoG -- RECONSTRUCTION"
 
-    def __init__(self, params: SDNFParams | None = None, *, backend: str = "taichi", arch: str = "cpu",
-                 fps: float = 30.0):
-        super().__init__(params, backend=backend, arch=arch, fps=fps)
-        self._be: Any = None
-        self._t = 0
-        self._prev = 0.5
-        self._run = 0
-        if backend == "taichi":
-            from ..taichi_runtime import ensure_taichi
-
-            ensure_taichi(arch)
-
     @property
     def threshold(self) -> float:
         """Static part of the (dynamic) alert threshold, ``0.5 + epsilon``."""
         return self.params.threshold
 
-    def reset(self) -> None:
-        self._t = 0
-        self._prev = 0.5
-        self._run = 0
-        if self._be is not None:
-            self._be.reset()
+    def _reset_state(self) -> None:
+        self._prev = 0.5  # I(t-1)
+        self._run = 0  # consecutive frames above the dynamic threshold
 
     #: Threshold sweep (experiments): the static alert margin epsilon.
     sweep_parameter = "epsilon (static threshold 0.5 + value)"
@@ -246,55 +250,40 @@ class SDNF(Model):
         return float(cls.params_type().epsilon)
 
     @classmethod
-    def sweep_alerts(cls, trace, values) -> list[np.ndarray]:
+    def sweep_alerts(cls, trace: Trace, values: Sequence[float]) -> list[np.ndarray]:
         """Alerts per frame at each ``epsilon``, replaying the dynamic-threshold rule on the saved output.
 
         The response ``I`` does not depend on ``epsilon``; the rule (``I(t) >
         max(0.5 + epsilon, I(t-1) + delta)`` on ``n_persist`` consecutive frames)
         is re-applied exactly as :meth:`step` does.
         """
-        p = cls.params_type()
         out = np.asarray(trace.output, dtype=np.float64)
         result = []
         for eps in values:
+            p = cls.params_type(epsilon=float(eps))
             prev, run = 0.5, 0
             alerts = np.zeros(out.shape, dtype=bool)
             for t, o in enumerate(out):
-                run = run + 1 if o > max(0.5 + eps, prev + p.delta) else 0
+                _, run = dynamic_threshold(p, o, prev, run)
                 prev = o
                 alerts[t] = run >= p.n_persist
             result.append(alerts)
         return result
 
-    def step(self, frame: np.ndarray) -> StepResult:
-        p = self.params
-        grey = to_grey(frame)
-        if self._be is None:
-            if self.backend_name == "taichi":
-                self._be = TaichiSDNFBackend(p, grey.shape, self.arch)
-            else:
-                from ..baselines_reference import NumpySDNFBackend
+    def _taichi_backend(self, shape: tuple[int, int]) -> TaichiSDNFBackend:
+        return TaichiSDNFBackend(self.params, shape, self.arch)
 
-                self._be = NumpySDNFBackend(p, grey.shape)
-        elif grey.shape != self._be.shape:
-            raise ValueError(f"frame {self._t} is {grey.shape[1]}x{grey.shape[0]} but this model runs at "
-                             f"{self._be.shape[1]}x{self._be.shape[0]}; call reset() on a new model")
-        t = self._t
-        self._t += 1
-        rho = self._be.load(grey, t == 0)
+    def _numpy_backend(self, shape: tuple[int, int]) -> NumpySDNFBackend:
+        return NumpySDNFBackend(self.params, shape)
+
+    def _step(self, t: int, grey: np.ndarray, rho: float) -> StepResult:
+        p = self.params
         b_t = p.B * (1.0 + p.kappa * rho)
         act = self._be.update(b_t)
-        out = 1.0 / (1.0 + math.exp(-act))
-        dyn = max(p.threshold, self._prev + p.delta)
-        above = out > dyn
-        self._run = self._run + 1 if above else 0
+        out = sigmoid(act)
+        dyn, self._run = dynamic_threshold(p, out, self._prev, self._run)
+        above = self._run > 0
         self._prev = out
         alert = self._run >= p.n_persist
         diag = dict(rho=rho, B_t=b_t, activity=act, dyn_threshold=dyn, above=int(above), run=self._run)
         return StepResult(t, out, alert, True, diag)
-
-    def fields(self) -> dict[str, np.ndarray]:
-        """The field ``u``, its firing rate, the binary input ``E`` and ``P``, (H, W) each."""
-        if self._be is None:
-            return {}
-        return self._be.fields()
