@@ -381,13 +381,16 @@ def _local(fn, tasks, workers, arch, rep, retries=1) -> Iterator[tuple[int, Any]
                 done = set(done) | set(inflight)
                 _stop_pool(ex)
                 ex = None
+            # A death counts against a task only when it ran alone: tasks in flight beside the one
+            # that killed the worker are suspects, re-run one at a time without a mark.
+            alone = len(inflight) == 1
             for fut in sorted(done, key=lambda f: inflight[f]):
                 i = inflight.pop(fut)
                 exc = fut.exception() if fut.done() else BrokenProcessPool("worker did not answer")
                 if exc is None:
                     yield i, fut.result()
                 elif isinstance(exc, BrokenProcessPool):
-                    deaths[i] += 1
+                    deaths[i] += alone
                     if deaths[i] <= retries:
                         retry.append(i)
                     else:
