@@ -558,3 +558,15 @@ def test_table1_shows_error_for_a_failed_run_not_none():
     table = format_table1(res)
     assert "None" not in table
     assert "| Dark approaching | error |" in table
+
+
+def test_temporary_files_of_dead_writers_are_removed(tmp_path):
+    from cdnf_ti.atomic import _new_temp, remove_stale_temps
+
+    (tmp_path / "traces").mkdir()
+    live = Path(_new_temp(tmp_path / "traces" / "a.csv"))  # this process: still writing
+    dead = tmp_path / "traces" / ".b.csv.999999999.0123abcd.tmp.csv"  # no such process
+    dead.write_text("half a trace")
+    (tmp_path / "traces" / "c.csv").write_text("finished")
+    assert remove_stale_temps(tmp_path) == 1
+    assert live.exists() and not dead.exists() and (tmp_path / "traces" / "c.csv").exists()
