@@ -144,8 +144,9 @@ def test_task_whose_worker_died_once_succeeds_on_retry(tmp_path):
     from cdnf_ti.experiments.parallel import map_tasks
     from fault_tasks import die_first_time
 
-    res = dict(map_tasks(die_first_time, [str(tmp_path / "m1"), str(tmp_path / "m2")], workers=2, arch=None))
-    assert res == {0: "ok", 1: "ok"}
+    res = dict(map_tasks(die_first_time, [None, str(tmp_path / "m1"), None], workers=2, arch=None))
+    assert res == {0: "ok", 1: "ok", 2: "ok"}
+    assert (tmp_path / "m1").read_text() == "died once"
 
 
 @linux_only
