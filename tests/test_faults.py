@@ -571,3 +571,29 @@ def test_temporary_files_of_dead_writers_are_removed(tmp_path):
     (tmp_path / "traces" / "c.csv").write_text("finished")
     assert remove_stale_temps(tmp_path) == 1
     assert live.exists() and not dead.exists() and (tmp_path / "traces" / "c.csv").exists()
+
+
+def test_one_failing_model_in_run_gives_an_error_line_for_that_model_only(looming_npy, tmp_path, capsys):
+    from cdnf_ti.models import MODELS, register_model
+    from cdnf_ti.models.sdnf import SDNF
+
+    class Broken(SDNF):
+        name = "broken_for_run_test"
+
+        def step(self, frame):
+            raise RuntimeError("model bug")
+
+    register_model(Broken)
+    try:
+        code = main([str(looming_npy), "--model", "cdnf,broken_for_run_test", "--out", str(tmp_path / "o"),
+                     "--no-progress"])
+    finally:
+        MODELS.pop("broken_for_run_test", None)
+    captured = capsys.readouterr()
+    assert code == 1
+    assert (tmp_path / "o" / "looming.cdnf.csv").exists()
+    assert not (tmp_path / "o" / "looming.broken_for_run_test.csv").exists()
+    assert captured.err.strip() == f"error: {looming_npy} [broken_for_run_test]: RuntimeError: model bug"
+    rows = list(csv.DictReader(open(tmp_path / "o" / "summary.csv")))
+    assert [(r["model"], r["status"]) for r in rows] == [("cdnf", "ok"),
+                                                          ("broken_for_run_test", "error: RuntimeError: model bug")]
