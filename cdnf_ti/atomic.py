@@ -11,6 +11,7 @@ import contextlib
 import json
 import math
 import os
+import re
 import secrets
 import sys
 from pathlib import Path
@@ -37,6 +38,35 @@ def _new_temp(path: Path) -> str:
         os.close(fd)
         return str(tmp)
     raise FileExistsError(f"cannot create a temporary file next to {path}")
+
+
+_TEMP_NAME = re.compile(r"^\..+\.(\d+)\.[0-9a-f]{8}\.tmp")
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True
+    return True
+
+
+def remove_stale_temps(folder: str | os.PathLike) -> int:
+    """Delete temporary files of :func:`atomic_write` under ``folder`` whose writer process is gone
+    (a worker killed mid-write, a ``kill -9``). Returns how many were removed."""
+    removed = 0
+    root = Path(folder)
+    if not root.is_dir():
+        return 0
+    for p in root.rglob(".*.tmp*"):
+        m = _TEMP_NAME.match(p.name)
+        if m and p.is_file() and not _pid_alive(int(m.group(1))):
+            with contextlib.suppress(OSError):
+                p.unlink()
+                removed += 1
+    return removed
 
 
 def atomic_write(path: str | os.PathLike, write: Callable[[str], None]) -> None:

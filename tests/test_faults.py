@@ -144,8 +144,9 @@ def test_task_whose_worker_died_once_succeeds_on_retry(tmp_path):
     from cdnf_ti.experiments.parallel import map_tasks
     from fault_tasks import die_first_time
 
-    res = dict(map_tasks(die_first_time, [str(tmp_path / "m1"), str(tmp_path / "m2")], workers=2, arch=None))
-    assert res == {0: "ok", 1: "ok"}
+    res = dict(map_tasks(die_first_time, [None, str(tmp_path / "m1"), None], workers=2, arch=None))
+    assert res == {0: "ok", 1: "ok", 2: "ok"}
+    assert (tmp_path / "m1").read_text() == "died once"
 
 
 @linux_only
@@ -558,3 +559,41 @@ def test_table1_shows_error_for_a_failed_run_not_none():
     table = format_table1(res)
     assert "None" not in table
     assert "| Dark approaching | error |" in table
+
+
+def test_temporary_files_of_dead_writers_are_removed(tmp_path):
+    from cdnf_ti.atomic import _new_temp, remove_stale_temps
+
+    (tmp_path / "traces").mkdir()
+    live = Path(_new_temp(tmp_path / "traces" / "a.csv"))  # this process: still writing
+    dead = tmp_path / "traces" / ".b.csv.999999999.0123abcd.tmp.csv"  # no such process
+    dead.write_text("half a trace")
+    (tmp_path / "traces" / "c.csv").write_text("finished")
+    assert remove_stale_temps(tmp_path) == 1
+    assert live.exists() and not dead.exists() and (tmp_path / "traces" / "c.csv").exists()
+
+
+def test_one_failing_model_in_run_gives_an_error_line_for_that_model_only(looming_npy, tmp_path, capsys):
+    from cdnf_ti.models import MODELS, register_model
+    from cdnf_ti.models.sdnf import SDNF
+
+    class Broken(SDNF):
+        name = "broken_for_run_test"
+
+        def step(self, frame):
+            raise RuntimeError("model bug")
+
+    register_model(Broken)
+    try:
+        code = main([str(looming_npy), "--model", "cdnf,broken_for_run_test", "--out", str(tmp_path / "o"),
+                     "--no-progress"])
+    finally:
+        MODELS.pop("broken_for_run_test", None)
+    captured = capsys.readouterr()
+    assert code == 1
+    assert (tmp_path / "o" / "looming.cdnf.csv").exists()
+    assert not (tmp_path / "o" / "looming.broken_for_run_test.csv").exists()
+    assert captured.err.strip() == f"error: {looming_npy} [broken_for_run_test]: RuntimeError: model bug"
+    rows = list(csv.DictReader(open(tmp_path / "o" / "summary.csv")))
+    assert [(r["model"], r["status"]) for r in rows] == [("cdnf", "ok"),
+                                                          ("broken_for_run_test", "error: RuntimeError: model bug")]

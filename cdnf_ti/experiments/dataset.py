@@ -24,7 +24,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from ..atomic import atomic_write_json, output_lock, prepare_output
+from ..atomic import atomic_write_json, output_lock, prepare_output, remove_stale_temps
 from ..errors import InputError, UserError
 from .labels import ClipLabel, read_labels, unlabelled_videos, validate_dataset
 from .scoring import Padding, score_clip
@@ -370,8 +370,16 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
     out = prepare_output(out)  # before any work: a folder that cannot be written fails now
     files = {clip: Path(f).resolve() for clip, f in files.items()}  # workers may run elsewhere
     with output_lock(out):
-        return _run_locked(folder, labels_path, labels, files, out, models, conditions, padding, seed, workers,
-                           scheduler, backend, arch, progress, figures, rain_params, on_record)
+        remove_stale_temps(out)  # left by a run killed mid-write
+        try:
+            return _run_locked(folder, labels_path, labels, files, out, models, conditions, padding, seed,
+                               workers, scheduler, backend, arch, progress, figures, rain_params, on_record)
+        except KeyboardInterrupt:
+            from .parallel import stop_all_pools
+
+            stop_all_pools()
+            remove_stale_temps(out)  # the workers stopped mid-write leave no half-written files
+            raise
 
 
 def _run_locked(folder, labels_path, labels, files, out, models, conditions, padding, seed, workers, scheduler,
