@@ -80,7 +80,7 @@ def test_sweep_writes_report_and_resumes(tmp_path):
 def test_sweep_reruns_a_task_whose_result_file_is_damaged(tmp_path):
     out = tmp_path / "sel"
     selectivity_sweep(["sdnf"], out, which="quick", classes=["grating"], workers=0, progress=False, figures=False)
-    victim = sorted((out / "tasks").glob("*.json"))[0]
+    victim = min((out / "tasks").glob("*.json"))
     victim.write_text("{not json")
     again = selectivity_sweep(["sdnf"], out, which="quick", classes=["grating"], workers=0, progress=False,
                               figures=False)

@@ -114,7 +114,7 @@ def test_resolve_input_passes_paths_to_open_source(tmp_path):
 
 @pytest.mark.parametrize("spec,match", [
     ("stim:purple_looming", "unknown stimulus"),
-    ("stim:dark_looming?velocity=3", "unknown parameter"),
+    ("stim:dark_looming?spin=3", "unknown parameter"),
     ("stim:dark_looming?seed=x", "not a number"),
     ("stim:dark_looming?coherence=0", "coherence"),
 ])
