@@ -16,6 +16,8 @@ import sys
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
+import numpy as np
+
 from .errors import OutputError, output_error
 
 #: Name of the lock file a run holds in its output folder.
@@ -109,8 +111,6 @@ def json_safe(o: Any) -> Any:
 
 
 def _json_default(o: Any) -> Any:
-    import numpy as np
-
     if isinstance(o, np.generic):
         return o.item()
     if isinstance(o, np.ndarray):

@@ -46,6 +46,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
+from ..taichi_runtime import current_arch, ensure_taichi
 from .basic import BASIC_STIMULI, BasicStimulus, basic_stimulus, check_seed
 
 BACKGROUND, KEPT, DISPLACED, TARGET = 0, 1, 2, 3
@@ -155,8 +156,6 @@ class IncoherentStimulus:
                     f"pixels on any frame (raise the coherence or shrink the object)")
         self._kernels = None
         if backend == "taichi":
-            from ..taichi_runtime import current_arch, ensure_taichi
-
             ensure_taichi(current_arch() or "cpu")
             from ..kernels import stimuli as K
             from ..kernels.common import COLUMN_BLOCKS
