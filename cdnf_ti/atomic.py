@@ -173,6 +173,7 @@ def output_lock(folder: str | os.PathLike, wait: bool = True,
         (default: print to stderr).
     """
     try:
+        # lazy: POSIX only
         import fcntl
     except ImportError:  # pragma: no cover - Windows
         yield

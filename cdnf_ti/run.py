@@ -30,18 +30,20 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from .atomic import atomic_write_text, output_lock, prepare_output
-from .cli_common import EXIT_FAILED as EXIT_FAILED  # re-exported: cdnf_ti.run was their home
-from .cli_common import EXIT_INTERRUPTED as EXIT_INTERRUPTED
-from .cli_common import EXIT_OK as EXIT_OK
-from .cli_common import EXIT_USAGE as EXIT_USAGE
-from .cli_common import add_model_options as add_model_options
-from .cli_common import check_model_options as check_model_options
-from .cli_common import drops_arg as drops_arg
-from .cli_common import finite_float as finite_float
-from .cli_common import parse_models as parse_models
-from .cli_common import positive_float as positive_float
-from .cli_common import seed_arg as seed_arg
-from .cli_common import unique_names as unique_names
+from .cli_common import (
+    EXIT_FAILED as EXIT_FAILED,  # re-exported: cdnf_ti.run was their home
+    EXIT_INTERRUPTED as EXIT_INTERRUPTED,
+    EXIT_OK as EXIT_OK,
+    EXIT_USAGE as EXIT_USAGE,
+    add_model_options as add_model_options,
+    check_model_options as check_model_options,
+    drops_arg as drops_arg,
+    finite_float as finite_float,
+    parse_models as parse_models,
+    positive_float as positive_float,
+    seed_arg as seed_arg,
+    unique_names as unique_names,
+)
 from .errors import InputError, UserError
 from .experiments.parallel import exit_on_second_interrupt, stop_all_pools
 from .frames import iter_grey

@@ -268,6 +268,7 @@ class BasicStimulus:
 def taichi_stimulus_kernels():
     """``(cdnf_ti.kernels.stimuli, column blocks)``, initialising Taichi on first use."""
     ensure_taichi(current_arch() or "cpu")
+    # lazy: kernels compile for the compiler/arch that ensure_taichi picks at run time
     from ..kernels import stimuli as K
     from ..kernels.common import COLUMN_BLOCKS
 

@@ -157,6 +157,7 @@ class IncoherentStimulus:
         self._kernels = None
         if backend == "taichi":
             ensure_taichi(current_arch() or "cpu")
+            # lazy: kernels compile for the compiler/arch that ensure_taichi picks at run time
             from ..kernels import stimuli as K
             from ..kernels.common import COLUMN_BLOCKS
 

@@ -202,6 +202,7 @@ class _TaichiRain:
 
     def __init__(self, shape: tuple[int, int], params: RainParams):
         ensure_taichi(current_arch() or "cpu")
+        # lazy: taichi (or quadrants) is chosen at run time by ensure_taichi
         import taichi as ti
 
         from ..kernels import stimuli as K

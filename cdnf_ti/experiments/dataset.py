@@ -28,15 +28,18 @@ from ..frames import iter_grey, open_source
 from ..models import create_model
 from ..models.base import NotConvergedWarning, run_models
 from ..stimuli.rain import RainParams, RainyFrames
+from . import parallel  # parallel.map_tasks looked up at call time (tests replace it)
 from .labels import ClipLabel, read_labels, unlabelled_videos, validate_dataset
-from .layout import CONDITIONS as CONDITIONS  # re-exported: dataset.py was their home
-from .layout import RAIN_CHOICES as RAIN_CHOICES
-from .layout import RESULT_COLUMNS as RESULT_COLUMNS
-from .layout import fingerprint as fingerprint
-from .layout import load_meta as load_meta
-from .layout import rain_seed as rain_seed
-from .layout import trace_path as trace_path
-from .parallel import TaskFailed, init_worker, map_tasks
+from .layout import (
+    CONDITIONS as CONDITIONS,  # re-exported: dataset.py was their home
+    RAIN_CHOICES as RAIN_CHOICES,
+    RESULT_COLUMNS as RESULT_COLUMNS,
+    fingerprint as fingerprint,
+    load_meta as load_meta,
+    rain_seed as rain_seed,
+    trace_path as trace_path,
+)
+from .parallel import TaskFailed, init_worker
 from .reports import write_reports
 from .scoring import Padding, score_clip
 
@@ -323,7 +326,7 @@ def _run_locked(folder, labels_path, labels, files, out, models, conditions, pad
                 tasks.append(ClipTask(lab.clip, str(files[lab.clip]), cond, tuple(todo), str(out), seed,
                                       backend, arch, rain_params))
     ran = 0
-    for i, res in map_tasks(run_clip_task, tasks, workers=workers, scheduler=scheduler, arch=arch,
+    for i, res in parallel.map_tasks(run_clip_task, tasks, workers=workers, scheduler=scheduler, arch=arch,
                             progress="clips" if progress else False, describe=describe_task):
         t = tasks[i]
         recs = ([dict(clip=t.clip, model=m, condition=t.condition, error=f"{t.path}: {res}") for m in t.models]

@@ -35,6 +35,7 @@ WINDOW_COLOUR = "#f4a6c0"  # the paper shades the collision period pink
 
 
 def _plt():
+    # lazy: optional heavy dependency, needed only when a figure is drawn
     import matplotlib
 
     if "matplotlib.pyplot" not in sys.modules and not os.environ.get("MPLBACKEND"):

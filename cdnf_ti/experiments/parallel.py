@@ -412,6 +412,7 @@ def _dask_task(fn, task, arch):
 
 def _dask(fn, tasks, scheduler, arch, rep, connect_timeout=20.0) -> Iterator[tuple[int, Any]]:
     try:
+        # lazy: heavy dependency, needed only with --scheduler
         from distributed import Client, as_completed
     except ImportError as e:  # pragma: no cover - dask[distributed] is a dependency
         raise UserError("--scheduler needs dask.distributed (pip install 'dask[distributed]')") from e

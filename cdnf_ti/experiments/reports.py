@@ -28,9 +28,11 @@ from .paramsweep import alert_levels
 from .report_page import write_dataset_html
 from .scoring import tally
 from .sweep import sweep_dataset, sweep_first_alerts, sweep_spec
-from .tables import csv_text as csv_text  # re-exported: their old home
-from .tables import pct as pct
-from .tables import read_results as read_results
+from .tables import (
+    csv_text as csv_text,  # re-exported: their old home
+    pct as pct,
+    read_results as read_results,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
     from .dataset import DatasetRun
