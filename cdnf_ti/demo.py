@@ -8,11 +8,11 @@ import time
 import warnings
 from typing import Sequence
 
+from .cli_common import add_model_options, check_model_options, parse_models
 from .limits import check_frame_size
 from .models import create_model
 from .models.base import NotConvergedWarning
 from .paper import TABLE1
-from .run import add_model_options, check_model_options, parse_models
 from .stimuli.basic import BASIC_STIMULI, PAPER_LABELS, basic_stimulus
 
 

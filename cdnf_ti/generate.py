@@ -20,11 +20,11 @@ from typing import Sequence
 
 from . import __version__
 from .atomic import prepare_output
+from .cli_common import drops_arg, positive_float, seed_arg
 from .errors import OutputError, UserError
 from .frames import iter_grey
 from .inputs import resolve_input
 from .limits import check_drops, check_frame_size
-from .run import drops_arg, positive_float, seed_arg
 from .stimuli.basic import BASIC_STIMULI, basic_stimulus
 from .stimuli.incoherent import IncoherentStimulus
 from .stimuli.io import output_format, write_frames, write_sidecar

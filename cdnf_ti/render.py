@@ -21,13 +21,13 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from .cli_common import EXIT_OK, add_model_options, parse_models
 from .errors import UserError
 from .experiments.labels import find_clip
 from .experiments.layout import trace_path
 from .frames import iter_grey, to_grey
 from .inputs import resolve_input
 from .models import create_model
-from .run import EXIT_OK, add_model_options, parse_models
 from .video import codec_for, write_video
 
 #: Fields shown per model (first three found), and their colour scale: "signed" (symmetric about 0) or "pos".

@@ -208,6 +208,12 @@ def _exit_now(code: int) -> None:
 
 
 def _load(target: str) -> Callable[[Sequence[str]], int]:
+    """The subcommand's ``main`` from its ``"module:function"`` name.
+
+    The entry point imports a subcommand module only when it runs (by name, not by an
+    import statement): start-up stays fast, and the subcommand modules may import this
+    package's shared CLI helpers (:mod:`cdnf_ti.cli_common`) without an import cycle.
+    """
     mod, fn = target.split(":")
     return getattr(importlib.import_module(mod), fn)
 

@@ -18,11 +18,11 @@ from pathlib import Path
 from typing import Sequence
 
 from ..atomic import output_lock, prepare_output
+from ..cli_common import add_model_options, check_model_options, parse_models, seed_arg
 from ..demo import format_table1
 from ..errors import InputError, UserError
 from ..limits import check_frame_size
 from ..render import render_dataset
-from ..run import add_model_options, check_model_options, parse_models, seed_arg
 from ..stimuli.basic import BASIC_STIMULI
 from . import builtin
 from .dataset import run_dataset
