@@ -24,15 +24,28 @@ if not _os.path.isdir(_os.path.join(_here, "kernels")) and _os.path.isfile(
 ):
     __path__.append(_root)  # type: ignore[name-defined]  # noqa: F821
 
+from ._version import __version__
 from .errors import InputError
 from .frames import FrameSource, iter_grey, open_source, to_grey
 from .models import (
-    CDNF, LGMD1, LGMD2, MODELS, SDNF, FLGMDONn, FLGMDParams, LGMD1Params, LGMD2Params, Model, SDNFParams,
-    StepResult, Trace, create_model, get_model_class, register_model,
+    CDNF,
+    LGMD1,
+    LGMD2,
+    MODELS,
+    SDNF,
+    FLGMDONn,
+    FLGMDParams,
+    LGMD1Params,
+    LGMD2Params,
+    Model,
+    SDNFParams,
+    StepResult,
+    Trace,
+    create_model,
+    get_model_class,
+    register_model,
 )
 from .params import CDNFParams
-
-__version__ = "0.1.0"
 
 __all__ = ["CDNF", "CDNFParams", "LGMD2", "LGMD2Params", "LGMD1", "LGMD1Params", "SDNF", "SDNFParams",
            "FLGMDONn", "FLGMDParams", "Model", "StepResult", "Trace", "MODELS", "create_model",

@@ -17,6 +17,8 @@ import sys
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
+import numpy as np
+
 from .errors import OutputError, output_error
 
 #: Name of the lock file a run holds in its output folder.
@@ -139,8 +141,6 @@ def json_safe(o: Any) -> Any:
 
 
 def _json_default(o: Any) -> Any:
-    import numpy as np
-
     if isinstance(o, np.generic):
         return o.item()
     if isinstance(o, np.ndarray):
@@ -203,6 +203,7 @@ def output_lock(folder: str | os.PathLike, wait: bool = True,
         (default: print to stderr).
     """
     try:
+        # lazy: POSIX only
         import fcntl
     except ImportError:  # pragma: no cover - Windows
         yield

@@ -8,7 +8,12 @@ import time
 import warnings
 from typing import Sequence
 
+from .cli_common import add_model_options, check_model_options, parse_models
+from .limits import check_frame_size
+from .models import create_model
+from .models.base import NotConvergedWarning
 from .paper import TABLE1
+from .stimuli.basic import BASIC_STIMULI, PAPER_LABELS, basic_stimulus
 
 
 def selectivity_table(models: Sequence[str], size: int = 600, backend: str = "taichi", arch: str = "cpu",
@@ -21,10 +26,6 @@ def selectivity_table(models: Sequence[str], size: int = 600, backend: str = "ta
         ``result[model][stimulus] = {"alert": 0/1, "first_alert": int|None,
         "max_output": float, "frames": int, "fps": float}``.
     """
-    from .models import create_model
-    from .models.base import NotConvergedWarning
-    from .stimuli.basic import BASIC_STIMULI, basic_stimulus
-
     result: dict[str, dict[str, dict]] = {}
     for name in models:
         result[name] = {}
@@ -47,8 +48,6 @@ def selectivity_table(models: Sequence[str], size: int = 600, backend: str = "ta
 
 def format_table1(result: dict[str, dict[str, dict]]) -> str:
     """Markdown table: each model's alert (paper's value in brackets)."""
-    from .stimuli.basic import BASIC_STIMULI, PAPER_LABELS
-
     models = list(result)
     head = "| Stimulus | " + " | ".join(f"{m} (paper)" for m in models) + " |"
     sep = "|---|" + "---|" * len(models)
@@ -68,9 +67,6 @@ def format_table1(result: dict[str, dict[str, dict]]) -> str:
 
 
 def main(argv: Sequence[str] = ()) -> int:
-    from .limits import check_frame_size
-    from .run import add_model_options, check_model_options, parse_models
-
     ap = argparse.ArgumentParser(prog="python -m cdnf_ti.run demo",
                                  description="Basic selectivity (paper Table I) on the six basic stimuli.")
     add_model_options(ap, default_models="cdnf")

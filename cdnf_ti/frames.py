@@ -193,7 +193,7 @@ def open_image_folder(path: str | os.PathLike, fps: float | None = None) -> Fram
     shape = first.shape[:2]
 
     def gen() -> Iterator[np.ndarray]:
-        for t, fp in enumerate(files):
+        for fp in files:
             img = cv2.imread(str(fp), cv2.IMREAD_UNCHANGED)
             if img is None:
                 raise InputError(fp, "cannot read image (unsupported or corrupt)")
@@ -226,7 +226,7 @@ def open_npy(path: str | os.PathLike, fps: float | None = None, color_order: str
     try:
         arr = np.load(path, mmap_mode="r", allow_pickle=False)
     except Exception as e:  # noqa: BLE001 - any failure here is a bad file
-        raise InputError(path, f"cannot read as a NumPy array ({type(e).__name__}: {e})".splitlines()[0])
+        raise InputError(path, f"cannot read as a NumPy array ({type(e).__name__}: {e})".splitlines()[0]) from None
     if arr.ndim not in (3, 4) or (arr.ndim == 4 and arr.shape[3] not in (1, 3)):
         raise InputError(path, f"array must be (T, H, W) or (T, H, W, 3); got shape {arr.shape}")
     if arr.shape[0] == 0:

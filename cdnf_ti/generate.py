@@ -19,8 +19,16 @@ from pathlib import Path
 from typing import Sequence
 
 from . import __version__
+from .atomic import prepare_output
+from .cli_common import drops_arg, positive_float, seed_arg
 from .errors import OutputError, UserError
-from .run import drops_arg, positive_float, seed_arg
+from .frames import iter_grey
+from .inputs import resolve_input
+from .limits import check_drops, check_frame_size
+from .stimuli.basic import BASIC_STIMULI, basic_stimulus
+from .stimuli.incoherent import IncoherentStimulus
+from .stimuli.io import output_format, write_frames, write_sidecar
+from .stimuli.rain import RainParams, RainyFrames
 
 
 def _add_rain_options(ap: argparse.ArgumentParser, flag: bool) -> None:
@@ -33,18 +41,11 @@ def _add_rain_options(ap: argparse.ArgumentParser, flag: bool) -> None:
 
 def rain_params_from_args(args: argparse.Namespace):
     """:class:`~cdnf_ti.stimuli.rain.RainParams` from ``--rain-drops`` (other fields: defaults)."""
-    from .stimuli.rain import RainParams
-
     return RainParams(drops=args.rain_drops)
 
 
 def generate_main(argv: Sequence[str]) -> int:
     """``generate NAME ... --out PATH``: write one (incoherent, optionally rainy) basic stimulus."""
-    from .stimuli.basic import BASIC_STIMULI, basic_stimulus
-    from .stimuli.incoherent import IncoherentStimulus
-    from .stimuli.io import output_format, write_frames, write_sidecar
-    from .stimuli.rain import RainyFrames
-
     ap = argparse.ArgumentParser(prog="python -m cdnf_ti.run generate",
                                  description="Generate a basic or incoherent stimulus to a lossless file "
                                              "(FFV1 .avi, or a PNG folder) with a JSON sidecar.")
@@ -52,7 +53,8 @@ def generate_main(argv: Sequence[str]) -> int:
     ap.add_argument("--coherence", type=float, default=1.0, help="coherence degree c in (0, 1] (default 1)")
     ap.add_argument("--seed", type=seed_arg, default=0, help="seed of the incoherent displacement (default 0)")
     ap.add_argument("--size", type=int, default=None,
-                    help="frame height = width in px (default 600); start half-size scales as size/60 (default_start_half_size)")
+                    help="frame height = width in px (default 600); start half-size scales as size/60 "
+                         "(default_start_half_size)")
     ap.add_argument("--height", type=int, default=None)
     ap.add_argument("--width", type=int, default=None)
     ap.add_argument("--fps", type=positive_float, default=None, help="frames per second (default 30)")
@@ -61,9 +63,6 @@ def generate_main(argv: Sequence[str]) -> int:
     ap.add_argument("--out", required=True, help="output .avi (FFV1) or folder (PNG frames)")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(list(argv))
-    from .atomic import prepare_output
-    from .limits import check_drops, check_frame_size
-
     output_format(args.out)
     size = args.size if args.size is not None else 600
     height = args.height if args.height is not None else size
@@ -114,11 +113,6 @@ def generate_main(argv: Sequence[str]) -> int:
 
 def rain_main(argv: Sequence[str]) -> int:
     """``rain VIDEO... --out DIR``: add synthetic rain to videos; print each video's SNR."""
-    from .inputs import resolve_input
-    from .frames import iter_grey
-    from .stimuli.io import write_frames, write_sidecar
-    from .stimuli.rain import RainyFrames
-
     ap = argparse.ArgumentParser(prog="python -m cdnf_ti.run rain",
                                  description="Add synthetic rain (paper, Sec. III-A-2) to videos; write lossless "
                                              "DIR/<clip>_rain.avi (or PNG folders) plus JSON sidecars with the SNR.")
@@ -130,11 +124,6 @@ def rain_main(argv: Sequence[str]) -> int:
     ap.add_argument("--format", choices=("avi", "png"), default="avi", help="FFV1 AVI (default) or PNG folders")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(list(argv))
-    from .stimuli.rain import RainParams
-
-    from .atomic import prepare_output
-    from .limits import check_drops, check_frame_size
-
     params = RainParams(drops=args.drops)
     out = prepare_output(args.out)  # before any work
     failed = 0

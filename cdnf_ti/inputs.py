@@ -25,8 +25,12 @@ from dataclasses import dataclass
 from typing import Any
 from urllib.parse import parse_qsl
 
-from .errors import InputError
+from .errors import InputError, UserError
 from .frames import FrameSource, open_source
+from .limits import check_frame_size
+from .stimuli.basic import BASIC_STIMULI, basic_stimulus
+from .stimuli.grating import GratingStimulus
+from .stimuli.incoherent import IncoherentStimulus
 
 STIM_PREFIX = "stim:"
 _INT_KEYS = ("seed", "size", "height", "width", "bar_width", "period")
@@ -65,8 +69,6 @@ def parse_stim_spec(spec: str) -> tuple[str, dict[str, Any]]:
     InputError
         Unknown stimulus, unknown or malformed parameter.
     """
-    from .stimuli.basic import BASIC_STIMULI
-
     body = spec[len(STIM_PREFIX):] if spec.startswith(STIM_PREFIX) else spec
     name, _, query = body.partition("?")
     if name not in BASIC_STIMULI and name != GRATING:
@@ -88,9 +90,6 @@ def parse_stim_spec(spec: str) -> tuple[str, dict[str, Any]]:
 
 def make_stimulus(name: str, params: dict[str, Any]):
     """Build the generator for ``name`` and parsed ``params`` (see module docstring)."""
-    from .stimuli.basic import basic_stimulus
-    from .stimuli.incoherent import IncoherentStimulus
-
     p = dict(params)
     coherence = float(p.pop("coherence", 1.0))
     seed = int(p.pop("seed", 0))
@@ -99,8 +98,6 @@ def make_stimulus(name: str, params: dict[str, Any]):
         p.setdefault("height", size)
         p.setdefault("width", size)
     if name == GRATING:
-        from .stimuli.grating import GratingStimulus
-
         if "coherence" in params:
             raise ValueError("a grating has no incoherent version (coherence applies to the basic stimuli)")
         return GratingStimulus(seed=seed if "seed" in params else None, **p)
@@ -126,9 +123,6 @@ def stimulus_label(name: str, params: dict[str, Any]) -> str:
 
 def check_stim_size(spec: str, params: dict[str, Any]) -> None:
     """Reject a stimulus whose frames could not be held here, before it is built (:mod:`cdnf_ti.limits`)."""
-    from .errors import UserError
-    from .limits import check_frame_size
-
     size = params.get("size", 600)
     h, w = params.get("height", size), params.get("width", size)
     try:

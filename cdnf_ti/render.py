@@ -19,8 +19,16 @@ from typing import Any, Iterator, Sequence
 
 import cv2
 import numpy as np
+from tqdm import tqdm
 
+from .cli_common import EXIT_OK, add_model_options, parse_models
 from .errors import UserError
+from .experiments.labels import find_clip
+from .experiments.layout import trace_path
+from .frames import iter_grey, to_grey
+from .inputs import resolve_input
+from .models import create_model
+from .video import codec_for, write_video
 
 #: Fields shown per model (first three found), and their colour scale: "signed" (symmetric about 0) or "pos".
 FIELD_CHOICES = {
@@ -128,8 +136,6 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
     window : (int, int), optional
         The labelled collision window (frames), shaded in the trace.
     """
-    from .frames import to_grey
-
     model.reset()
     out: list[float] = []
     thr: list[float | None] = []
@@ -139,8 +145,6 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
     n_ts = getattr(model.params, "n_ts", None)
     bar = None
     if progress:
-        from tqdm import tqdm
-
         bar = tqdm(total=n_total, desc=progress if isinstance(progress, str) else "render", unit="frame",
                    disable=None)
     try:
@@ -193,11 +197,6 @@ def render_video(source: str | Path, model_name: str, out: str | Path, params: A
     InputError
         Unreadable input, or a video the codec cannot write.
     """
-    from .frames import iter_grey
-    from .inputs import resolve_input
-    from .models import create_model
-    from .video import codec_for, write_video
-
     codec_for(out)  # a bad suffix fails before any work
     src = resolve_input(source)
     model = create_model(model_name, params, backend=backend, arch=arch, fps=src.fps)
@@ -207,8 +206,6 @@ def render_video(source: str | Path, model_name: str, out: str | Path, params: A
 
 def render_main(argv: Sequence[str]) -> int:
     """``python -m cdnf_ti.run render VIDEO --model cdnf --out movie.mp4``."""
-    from .run import EXIT_OK, add_model_options, parse_models
-
     ap = argparse.ArgumentParser(
         prog="python -m cdnf_ti.run render",
         description="Write a field movie: the input, the model's ON, OFF and Summation fields (colour-mapped) "
@@ -242,9 +239,6 @@ def render_dataset(run: Any, folder: str | Path, progress: bool = False) -> list
 
     A movie newer than its trace is kept (a rerun does not redraw it).
     """
-    from .experiments.dataset import trace_path
-    from .experiments.labels import find_clip
-
     made = []
     for lab in run.labels:
         for m in run.models:

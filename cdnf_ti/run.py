@@ -23,12 +23,36 @@ import csv
 import importlib
 import io
 import math
+import os
 import sys
 import warnings
 from pathlib import Path
 from typing import Callable, Sequence
 
+from .atomic import atomic_write_text, output_lock, prepare_output
+from .cli_common import (
+    EXIT_FAILED as EXIT_FAILED,  # re-exported: cdnf_ti.run was their home
+    EXIT_INTERRUPTED as EXIT_INTERRUPTED,
+    EXIT_OK as EXIT_OK,
+    EXIT_USAGE as EXIT_USAGE,
+    add_model_options as add_model_options,
+    check_model_options as check_model_options,
+    drops_arg as drops_arg,
+    finite_float as finite_float,
+    parse_models as parse_models,
+    positive_float as positive_float,
+    seed_arg as seed_arg,
+    unique_names as unique_names,
+)
 from .errors import InputError, UserError
+from .experiments.parallel import exit_on_second_interrupt, stop_all_pools
+from .frames import iter_grey
+from .inputs import resolve_input
+from .limits import check_drops, check_frame_size
+from .models import create_model
+from .models.base import NotConvergedWarning, run_models
+from .params import CDNFParams
+from .stimuli.rain import RainParams, RainyFrames
 
 #: Subcommands: first word on the command line -> "module:function(argv) -> int".
 SUBCOMMANDS: dict[str, str] = {
@@ -40,122 +64,6 @@ SUBCOMMANDS: dict[str, str] = {
     "experiment": "cdnf_ti.experiments.cli:experiment_main",
     "render": "cdnf_ti.render:render_main",
 }
-
-EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
-
-
-def add_model_options(ap: argparse.ArgumentParser, default_models: str = "cdnf") -> None:
-    """Options shared by every command that runs models."""
-    ap.add_argument("--model", "--models", dest="models", default=default_models,
-                    help="model name(s), comma separated (default: %(default)s); 'all' for every model")
-    ap.add_argument("--backend", default="taichi", choices=("taichi", "numpy"),
-                    help="taichi kernels (default) or the NumPy float64 reference")
-    ap.add_argument("--arch", default="cpu", choices=("cpu", "cuda", "vulkan", "gpu"),
-                    help="Taichi architecture (default: cpu)")
-
-
-def check_model_options(args: argparse.Namespace) -> None:
-    """Check the options of :func:`add_model_options` before any work: the Taichi arch must exist here.
-
-    Raises
-    ------
-    BackendUnavailableError
-        ``--arch`` names a GPU backend this machine does not have (one line, exit 2).
-    """
-    from .taichi_runtime import check_arch
-
-    if getattr(args, "backend", "taichi") == "taichi":
-        check_arch(getattr(args, "arch", "cpu"))
-
-
-def finite_float(text: str) -> float:
-    """argparse type: a finite number (rejects inf and nan)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
-    return value
-
-
-def positive_float(text: str) -> float:
-    """argparse type: a finite number > 0."""
-    value = finite_float(text)
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
-    return value
-
-
-def drops_arg(text: str) -> int:
-    """argparse type: a rain droplet count per frame (0 .. :data:`cdnf_ti.limits.MAX_DROPS`)."""
-    from .limits import MAX_DROPS
-
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if not math.isfinite(value) or value != int(value) or value < 0:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text!r}")
-    if value > MAX_DROPS:
-        raise argparse.ArgumentTypeError(f"{text} droplets per frame is too many (at most {MAX_DROPS:,})")
-    return int(value)
-
-
-def seed_arg(text: str) -> int:
-    """argparse type for seeds: a non-negative integer."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = -1
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {text!r}")
-    return value
-
-
-def parse_models(spec: str) -> list[str]:
-    """``"cdnf,lgmd2"`` -> registry names; ``"all"`` -> every registered model."""
-    from .models import MODELS, get_model_class
-
-    if spec.strip().lower() == "all":
-        return list(MODELS)
-    names = [s.strip() for s in spec.split(",") if s.strip()]
-    if not names:
-        raise UserError("no model named")
-    try:
-        return list(dict.fromkeys(get_model_class(n).name for n in names))
-    except ValueError as e:
-        raise UserError(str(e)) from None
-
-
-def unique_names(paths: Sequence[str], names: Sequence[str]) -> list[str]:
-    """Output names for inputs, made distinct: inputs sharing a name (``A/clip.mp4``, ``B/clip.mp4``)
-    are named after their folder too (``A_clip``, ``B_clip``), then numbered (``clip-2``) if need be.
-
-    Names are compared case-insensitively (case-insensitive file systems).
-    """
-    def counts(xs):
-        c: dict[str, int] = {}
-        for x in xs:
-            c[x.lower()] = c.get(x.lower(), 0) + 1
-        return c
-
-    c = counts(names)
-    out = []
-    for p, n in zip(paths, names):
-        parent = Path(str(p)).parent.name if c[n.lower()] > 1 else ""
-        out.append(f"{parent}_{n}" if parent else n)
-    seen: dict[str, int] = {}
-    final = []
-    for n in out:
-        k = n.lower()
-        seen[k] = seen.get(k, 0) + 1
-        final.append(n if seen[k] == 1 else f"{n}-{seen[k]}")
-    while len({n.lower() for n in final}) < len(final):  # a numbered name met a real one: number again
-        final = [n if i == [m.lower() for m in final].index(n.lower()) else f"{n}-{i + 1}"
-                 for i, n in enumerate(final)]
-    return final
-
 
 def _videos_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
@@ -191,15 +99,11 @@ def run_videos(argv: Sequence[str]) -> int:
 
     Inputs that share a name get distinct output names (:func:`unique_names`).
     """
-    from .atomic import atomic_write_text, output_lock, prepare_output
-
     args = _videos_parser().parse_args(argv)
     models = parse_models(args.models)
     check_model_options(args)
     params = None
     if args.epsilon is not None and "cdnf" in models:
-        from .params import CDNFParams
-
         try:
             params = CDNFParams(epsilon=args.epsilon)
         except ValueError as e:
@@ -210,16 +114,8 @@ def run_videos(argv: Sequence[str]) -> int:
 
 
 def _run_videos(args, models: list[str], params, out: Path, write_text) -> int:
-    from .frames import iter_grey
-    from .inputs import resolve_input
-    from .limits import check_drops, check_frame_size
-    from .models import create_model
-    from .models.base import NotConvergedWarning, run_models
-
     rain_params = None
     if args.rain:
-        from .stimuli.rain import RainParams, RainyFrames
-
         rain_params = RainParams(drops=args.rain_drops)
     columns = ["clip", "model", "frames", "first_alert", "max_output", "fps", "status"]
     if args.rain:
@@ -303,8 +199,6 @@ def _run_videos(args, models: list[str], params, out: Path, write_text) -> int:
 
 def _exit_now(code: int) -> None:
     """Flush stdout/stderr and end the process with ``code`` (no interpreter shutdown)."""
-    import os
-
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
@@ -314,6 +208,12 @@ def _exit_now(code: int) -> None:
 
 
 def _load(target: str) -> Callable[[Sequence[str]], int]:
+    """The subcommand's ``main`` from its ``"module:function"`` name.
+
+    The entry point imports a subcommand module only when it runs (by name, not by an
+    import statement): start-up stays fast, and the subcommand modules may import this
+    package's shared CLI helpers (:mod:`cdnf_ti.cli_common`) without an import cycle.
+    """
     mod, fn = target.split(":")
     return getattr(importlib.import_module(mod), fn)
 
@@ -324,8 +224,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     A :class:`~cdnf_ti.errors.UserError` becomes one ``error:`` line and exit
     code 2; any other exception propagates with its traceback (it is a bug).
     """
-    from .experiments.parallel import exit_on_second_interrupt
-
     program = argv is None
     if program:  # run as a program: a second Ctrl-C after a first one ends it at once
         exit_on_second_interrupt(True)
@@ -340,8 +238,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
-        from .experiments.parallel import stop_all_pools
-
         stop_all_pools()  # workers are never waited for
         print("interrupted: finished results are saved; run the same command again to resume",
               file=sys.stderr)

@@ -15,5 +15,6 @@ from .grating import GratingStimulus
 from .incoherent import IncoherentStimulus, incoherent_stimulus, luminance_change, luminance_change_match
 from .rain import RainParams, RainyFrames, snr_db
 
-__all__ = ["BASIC_STIMULI", "BasicStimulus", "basic_stimulus", "default_start_half_size", "GratingStimulus", "IncoherentStimulus", "incoherent_stimulus",
+__all__ = ["BASIC_STIMULI", "BasicStimulus", "basic_stimulus", "default_start_half_size",
+           "GratingStimulus", "IncoherentStimulus", "incoherent_stimulus",
            "luminance_change", "luminance_change_match", "RainParams", "RainyFrames", "snr_db"]

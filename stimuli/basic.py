@@ -26,6 +26,8 @@ from typing import Iterator
 
 import numpy as np
 
+from ..taichi_runtime import current_arch, ensure_taichi
+
 #: Image-size laws of the looming/receding square (``BasicStimulus.expansion``).
 EXPANSIONS = ("inverse", "linear")
 BACKENDS = ("numpy", "taichi")
@@ -265,9 +267,8 @@ class BasicStimulus:
 
 def taichi_stimulus_kernels():
     """``(cdnf_ti.kernels.stimuli, column blocks)``, initialising Taichi on first use."""
-    from ..taichi_runtime import current_arch, ensure_taichi
-
     ensure_taichi(current_arch() or "cpu")
+    # lazy: kernels compile for the compiler/arch that ensure_taichi picks at run time
     from ..kernels import stimuli as K
     from ..kernels.common import COLUMN_BLOCKS
 

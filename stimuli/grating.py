@@ -21,7 +21,7 @@ from typing import Iterator
 
 import numpy as np
 
-from .basic import BACKENDS, check_seed
+from .basic import BACKENDS, check_seed, taichi_stimulus_kernels
 
 ORIENTATIONS = ("vertical", "horizontal")
 
@@ -149,8 +149,6 @@ class GratingStimulus:
         if self.backend == "numpy":
             return grating_numpy(self.height, self.width, sh, self.period, self.bar_width, self.vertical,
                                  self.bar_grey, self.background_grey)
-        from .basic import taichi_stimulus_kernels
-
         K, blocks = taichi_stimulus_kernels()
         out = np.empty((self.height, self.width), dtype=np.float32)
         K.render_grating(out, sh, self.period, self.bar_width, int(self.vertical), self.bar_grey,

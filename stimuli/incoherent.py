@@ -46,6 +46,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
+from ..taichi_runtime import current_arch, ensure_taichi
 from .basic import BASIC_STIMULI, BasicStimulus, basic_stimulus, check_seed
 
 BACKGROUND, KEPT, DISPLACED, TARGET = 0, 1, 2, 3
@@ -155,9 +156,8 @@ class IncoherentStimulus:
                     f"pixels on any frame (raise the coherence or shrink the object)")
         self._kernels = None
         if backend == "taichi":
-            from ..taichi_runtime import current_arch, ensure_taichi
-
             ensure_taichi(current_arch() or "cpu")
+            # lazy: kernels compile for the compiler/arch that ensure_taichi picks at run time
             from ..kernels import stimuli as K
             from ..kernels.common import COLUMN_BLOCKS
 

@@ -18,9 +18,12 @@ from typing import Any, Iterable, Iterator
 
 import cv2
 import numpy as np
+from tqdm import tqdm
 
 from ..atomic import atomic_write, atomic_write_json
 from ..errors import InputError, OutputError, output_error
+from ..frames import iter_grey, open_source
+from ..video import open_writer
 
 FORMATS = ("avi", "png")
 
@@ -80,8 +83,6 @@ def write_frames(frames: Iterable[np.ndarray], path: str | os.PathLike, fps: flo
     path = Path(path)
     bar = None
     if progress:
-        from tqdm import tqdm
-
         bar = tqdm(total=total, desc=progress if isinstance(progress, str) else path.name, unit="frame",
                    leave=False, disable=None)
     count = 0
@@ -94,8 +95,6 @@ def write_frames(frames: Iterable[np.ndarray], path: str | os.PathLike, fps: flo
                     for f in frames:
                         g = to_uint8(f)
                         if writer is None:
-                            from ..video import open_writer  # the one writer of cdnf_ti
-
                             try:
                                 writer = open_writer(tmp, fps, (g.shape[1], g.shape[0]), "FFV1", is_color=False,
                                                      name=path)
@@ -185,15 +184,11 @@ def read_sidecar(path: str | os.PathLike) -> dict[str, Any]:
 
 def read_frames(path: str | os.PathLike) -> Iterator[np.ndarray]:
     """Yield the frames of a written file as float32 (H, W) in [0, 1] (``uint8 / 255``)."""
-    from ..frames import iter_grey, open_source
-
     for g in iter_grey(open_source(path)):
         yield g.astype(np.float32) / np.float32(255.0) if g.dtype == np.uint8 else g
 
 
 def read_frames_uint8(path: str | os.PathLike) -> Iterator[np.ndarray]:
     """Yield the frames of a written file as stored: uint8 (H, W)."""
-    from ..frames import iter_grey, open_source
-
     for g in iter_grey(open_source(path)):
         yield to_uint8(g)

@@ -29,6 +29,7 @@ from typing import Iterable, Iterator
 import numpy as np
 
 from ..frames import to_grey
+from ..taichi_runtime import current_arch, ensure_taichi
 from .basic import check_seed
 
 #: The paper's frame size for 500 droplets per frame (height, width).
@@ -200,9 +201,8 @@ class _TaichiRain:
     """Per-shape Taichi buffers and kernels for the rain steps."""
 
     def __init__(self, shape: tuple[int, int], params: RainParams):
-        from ..taichi_runtime import current_arch, ensure_taichi
-
         ensure_taichi(current_arch() or "cpu")
+        # lazy: taichi (or quadrants) is chosen at run time by ensure_taichi
         import taichi as ti
 
         from ..kernels import stimuli as K

@@ -1,10 +1,8 @@
 """Shared fixtures: one Taichi runtime per test session, small stimuli, shared data."""
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]

@@ -7,6 +7,7 @@ are not multiples of the lane width.
 """
 import numpy as np
 import pytest
+from conftest import small_stimulus
 
 from cdnf_ti import CDNF, CDNFParams
 from cdnf_ti.bench.inputs import standin_video
@@ -14,8 +15,6 @@ from cdnf_ti.kernels.cdnf import tile_blocks
 from cdnf_ti.models.cdnf import LaneTaichiCDNFBackend, TaichiCDNFBackend
 from cdnf_ti.reference import NumpyCDNFBackend
 from cdnf_ti.stimuli.incoherent import incoherent_stimulus
-
-from conftest import small_stimulus
 
 BORDERS = ["replicate", "reflect", "zero"]
 

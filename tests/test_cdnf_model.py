@@ -1,14 +1,12 @@
 """C-DNF model behaviour: resting state, convergence, Taichi vs NumPy float64 reference."""
-import warnings
 
 import numpy as np
 import pytest
+from conftest import small_stimulus
 
 from cdnf_ti import CDNF, CDNFParams
 from cdnf_ti.models.base import NotConvergedWarning
 from cdnf_ti.stimuli.basic import BASIC_STIMULI, basic_stimulus
-
-from conftest import small_stimulus
 
 
 def _run(name, backend, params=None, size=96, **kw):

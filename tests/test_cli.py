@@ -125,4 +125,5 @@ def test_negative_seed_option_is_rejected_with_exit_code_2(looming_npy, tmp_path
 
 def test_dataset_given_a_file_instead_of_a_folder_says_so(looming_npy, tmp_path, capsys):
     assert main(["dataset", str(looming_npy), "--out", str(tmp_path / "o")]) == 2
-    assert capsys.readouterr().err.strip() == f"error: {looming_npy}: not a folder (give the folder that holds the videos and labels.csv)"
+    assert capsys.readouterr().err.strip() == (
+        f"error: {looming_npy}: not a folder (give the folder that holds the videos and labels.csv)")

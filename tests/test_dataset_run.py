@@ -184,7 +184,7 @@ def test_rain_condition_is_deterministic_and_reports_snr(dataset, tmp_path):
     shutil.copy(dataset / "dark_looming.avi", ds)
     (ds / "labels.csv").write_text("clip,label,window_start,window_end\ndark_looming,collision,32,45\n")
     a = run_dataset(ds, None, tmp_path / "a", **kw)
-    b = run_dataset(ds, None, tmp_path / "b", **kw)
+    run_dataset(ds, None, tmp_path / "b", **kw)
     assert _traces(tmp_path / "a") == _traces(tmp_path / "b")
     rain = [r for r in a.rows if r["condition"] == "rain"][0]
     clean = [r for r in a.rows if r["condition"] == "clean"][0]
@@ -207,5 +207,5 @@ def test_rerun_with_other_options_recomputes_instead_of_reusing(dataset, tmp_pat
     other = run_dataset(ds, None, out, seed=5, **kw)
     assert (other.ran, other.skipped) == (1, 0)
     assert other.rows[0]["snr_db"] != first.rows[0]["snr_db"]
-    fresh = run_dataset(ds, None, tmp_path / "fresh", seed=5, **kw)
+    run_dataset(ds, None, tmp_path / "fresh", seed=5, **kw)
     assert _traces(out) == _traces(tmp_path / "fresh")

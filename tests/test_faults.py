@@ -132,8 +132,9 @@ def test_sigint_on_parallel_dataset_run_keeps_finished_clips_and_resume_skips_th
 # --- 5. dead workers and orphans ---------------------------------------------------------------------------
 
 def test_dead_worker_task_is_retried_once_then_recorded_as_failed():
-    from cdnf_ti.experiments.parallel import TaskFailed, map_tasks
     from fault_tasks import die_on
+
+    from cdnf_ti.experiments.parallel import TaskFailed, map_tasks
 
     res = dict(map_tasks(die_on, ["a", "die", "b", "c"], workers=2, arch=None))
     assert [res[i] for i in (0, 2, 3)] == ["a", "b", "c"]  # the other tasks are not lost
@@ -141,8 +142,9 @@ def test_dead_worker_task_is_retried_once_then_recorded_as_failed():
 
 
 def test_task_whose_worker_died_once_succeeds_on_retry(tmp_path):
-    from cdnf_ti.experiments.parallel import map_tasks
     from fault_tasks import die_first_time
+
+    from cdnf_ti.experiments.parallel import map_tasks
 
     res = dict(map_tasks(die_first_time, [None, str(tmp_path / "m1"), None], workers=2, arch=None))
     assert res == {0: "ok", 1: "ok", 2: "ok"}
@@ -531,8 +533,9 @@ def test_library_adopts_a_host_programs_taichi_runtime():
 
 
 def test_progress_outside_a_terminal_is_one_line_per_task_and_a_summary(capsys):
-    from cdnf_ti.experiments.parallel import map_tasks
     from fault_tasks import sleep_then_pid
+
+    from cdnf_ti.experiments.parallel import map_tasks
 
     list(map_tasks(sleep_then_pid, [0.0, 0.0, 0.0], workers=0, progress="clips",
                    describe=lambda t, r: f"clip{t} [cdnf, clean]" + ("" if r is None else ": 0.0 s")))

@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from conftest import small_stimulus
-from cdnf_ti.baselines_reference import delayed_spread, correlate3, kernel_3x3
+
+from cdnf_ti.baselines_reference import correlate3, delayed_spread, kernel_3x3
 from cdnf_ti.models import FLGMDONn, FLGMDParams
 from cdnf_ti.stimuli.basic import BASIC_STIMULI
 

@@ -1,12 +1,16 @@
-"""Every module imports on its own, as the first import of a fresh interpreter.
+"""Every module imports on its own, as the first import of a fresh interpreter, and no import cycle exists.
 
-An import cycle shows up only when a module of the cycle is the first one
-imported, so each module is imported first in its own interpreter
+An import cycle that breaks shows up only when a module of the cycle is the first
+one imported, so each module is imported first in its own interpreter
 (``python -c "import cdnf_ti.X"``); then all of them in one interpreter in
-sorted and in reverse order.
+sorted and in reverse order. A cycle that happens to import in every order is
+still a cycle: the graph of module-level imports (read with :mod:`ast`) must be
+acyclic. Imports stay at module level except for the lazy ones listed in
+:data:`LAZY_OK`.
 """
 from __future__ import annotations
 
+import ast
 import os
 import subprocess
 import sys
@@ -71,3 +75,144 @@ def test_all_modules_import_together_in_any_order(order):
     mods = MODULES if order == "sorted" else MODULES[::-1]
     r = _import("; ".join(f"import {m}" for m in mods))
     assert r.returncode == 0, r.stderr[-3000:]
+
+
+def _module_of(path: Path) -> tuple[str, bool] | None:
+    for package, folder in PACKAGES.items():
+        if folder in path.parents:
+            parts = path.relative_to(folder).with_suffix("").parts
+            if parts[-1] == "__init__":
+                return ".".join((package, *parts[:-1])), True
+            return ".".join((package, *parts)), False
+    return None
+
+
+def _module_level_imports(body: list) -> list:
+    """Import statements run at import time: at top level or in top-level if/try blocks
+    (``if TYPE_CHECKING:`` blocks never run)."""
+    found = []
+    for node in body:
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            found.append(node)
+        elif isinstance(node, ast.If):
+            if not (isinstance(node.test, ast.Name) and node.test.id == "TYPE_CHECKING"):
+                found += _module_level_imports(node.body) + _module_level_imports(node.orelse)
+        elif isinstance(node, ast.Try):
+            found += _module_level_imports(node.body + node.orelse + node.finalbody)
+            for handler in node.handlers:
+                found += _module_level_imports(handler.body)
+    return found
+
+
+def _imported(node, module: str, is_package: bool, known: set[str]) -> set[str]:
+    """The package modules one import statement imports (``from P import name``: ``P.name`` if
+    that is a module, else ``P``)."""
+    if isinstance(node, ast.Import):
+        return {a.name for a in node.names if a.name in known}
+    if node.level:
+        base = (module if is_package else module.rpartition(".")[0]).split(".")
+        base = ".".join(base[:len(base) - (node.level - 1)] + ([node.module] if node.module else []))
+    else:
+        base = node.module or ""
+    out = set()
+    for a in node.names:
+        if f"{base}.{a.name}" in known:
+            out.add(f"{base}.{a.name}")
+        elif base in known:
+            out.add(base)
+    return out
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Module -> the package modules it imports at module level."""
+    files = {}
+    for folder in PACKAGES.values():
+        for path in folder.rglob("*.py"):
+            info = _module_of(path)
+            if info and info[0] in MODULES:
+                files[info[0]] = (path, info[1])
+    known = set(files)
+    graph = {}
+    for module, (path, is_package) in files.items():
+        edges = set()
+        for node in _module_level_imports(ast.parse(path.read_text(encoding="utf-8")).body):
+            edges |= _imported(node, module, is_package, known)
+        edges.discard(module)
+        graph[module] = edges
+    return graph
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """One cycle of ``graph`` as a list of nodes (first == last), or None if it is acyclic."""
+    state: dict[str, int] = {}  # 1: on the current path, 2: done
+    path: list[str] = []
+
+    def visit(v: str) -> list[str] | None:
+        state[v] = 1
+        path.append(v)
+        for w in sorted(graph.get(v, ())):
+            if state.get(w) == 1:
+                return path[path.index(w):] + [w]
+            if w not in state and (cycle := visit(w)):
+                return cycle
+        path.pop()
+        state[v] = 2
+        return None
+
+    for v in sorted(graph):
+        if v not in state and (cycle := visit(v)):
+            return cycle
+    return None
+
+
+def test_cycle_finder_finds_a_cycle():
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": set()}) == ["a", "b", "c", "a"]
+    assert find_cycle({"a": {"b"}, "b": set()}) is None
+
+
+def test_import_graph_reads_relative_imports():
+    graph = import_graph()
+    assert "cdnf_ti.cli_common" in graph["cdnf_ti.run"]
+    assert "cdnf_ti.experiments.layout" in graph["cdnf_ti.experiments.reports"]
+    assert "cdnf_ti.models.base" in graph["cdnf_ti.models"]
+
+
+def test_no_module_level_import_cycle():
+    cycle = find_cycle(import_graph())
+    assert cycle is None, "import cycle: " + " -> ".join(cycle)
+
+
+#: Imports that may stay inside functions: optional or heavy dependencies, platform modules,
+#: and Taichi itself and the kernels, which must be imported only after the compiler and
+#: arch are chosen at run time (cdnf_ti.taichi_runtime.ensure_taichi).
+LAZY_OK = ("taichi", "quadrants", "matplotlib", "distributed", "dask", "scipy", "torch", "fcntl",
+           "cdnf_ti.kernels")
+
+#: Files of the engine branch (compiler layer, kernels, benchmarks), not yet held to the rule.
+ENGINE_FILES = {"cdnf_ti/models/cdnf.py", "cdnf_ti/taichi_runtime.py", "cdnf_ti/solver.py", "cdnf_ti/params.py"}
+
+
+def _absolute(node: ast.ImportFrom, module: str, is_package: bool) -> str:
+    if not node.level:
+        return node.module or ""
+    base = (module if is_package else module.rpartition(".")[0]).split(".")
+    return ".".join(base[:len(base) - (node.level - 1)] + ([node.module] if node.module else []))
+
+
+def test_imports_are_at_module_level_except_the_lazy_ones():
+    late = []
+    for folder in (ROOT / "cdnf_ti", ROOT / "stimuli"):
+        for path in sorted(folder.rglob("*.py")):
+            rel = path.relative_to(ROOT).as_posix()
+            if rel in ENGINE_FILES:
+                continue
+            module, is_package = _module_of(path)
+            tree = ast.parse(path.read_text(encoding="utf-8"))
+            in_functions = {id(n): n for f in ast.walk(tree) if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef))
+                            for n in ast.walk(f) if isinstance(n, (ast.Import, ast.ImportFrom))}
+            for node in in_functions.values():
+                names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                         else [_absolute(node, module, is_package)])
+                if not all(n.split(".")[0] in LAZY_OK or n.startswith("cdnf_ti.kernels") for n in names):
+                    late.append(f"{rel}:{node.lineno}: {ast.unparse(node)}")
+    assert not late, "imports inside functions (move them to module level):\n" + "\n".join(late)

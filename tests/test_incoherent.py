@@ -8,8 +8,12 @@ import pytest
 
 from cdnf_ti.stimuli.basic import BASIC_STIMULI, basic_stimulus
 from cdnf_ti.stimuli.incoherent import (
-    DISPLACED, KEPT, TARGET, IncoherentStimulus, displaced_count, incoherent_stimulus, luminance_change,
-    luminance_change_match, render_numpy,
+    IncoherentStimulus,
+    displaced_count,
+    incoherent_stimulus,
+    luminance_change,
+    luminance_change_match,
+    render_numpy,
 )
 
 SIZE = 72

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from conftest import small_stimulus
+
 from cdnf_ti.models import LGMD1, LGMD1Params
 from cdnf_ti.stimuli.basic import BASIC_STIMULI
 

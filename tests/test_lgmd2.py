@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from conftest import small_stimulus
+
 from cdnf_ti.models import LGMD2, LGMD2Params, create_model
 from cdnf_ti.models.lgmd2 import LGMDFamily, frame_interval_ms, sfa_step, spike_count
 from cdnf_ti.stimuli.basic import BASIC_STIMULI
@@ -204,8 +204,9 @@ def test_cli_runs_several_models_on_an_npy_video(tmp_path, capsys):
 
 
 def test_sweep_alerts_at_default_count_reproduces_the_run_alerts():
-    from cdnf_ti import LGMD2
     from conftest import small_stimulus
+
+    from cdnf_ti import LGMD2
 
     tr = LGMD2().run(small_stimulus("dark_looming", size=96).frames())
     (alerts,) = LGMD2.sweep_alerts(tr, [LGMD2.sweep_default()])

@@ -11,8 +11,16 @@ import numpy as np
 import pytest
 from conftest import small_stimulus
 
-from cdnf_ti.models import MODELS, Model, ModelBackend, StepResult, Sweepable, create_model, get_model_class
-from cdnf_ti.models import register_model
+from cdnf_ti.models import (
+    MODELS,
+    Model,
+    ModelBackend,
+    StepResult,
+    Sweepable,
+    create_model,
+    get_model_class,
+    register_model,
+)
 from cdnf_ti.models.base import run_models
 
 

@@ -10,12 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from cdnf_ti.experiments.paramsweep import (
-    build_grid,
-    parse_param,
-    run_param_sweep,
-    setting_key,
-)
+from cdnf_ti.experiments.paramsweep import build_grid, parse_param, run_param_sweep, setting_key
 from cdnf_ti.experiments.synthetic import make_synthetic_dataset
 from cdnf_ti.params import CDNFParams
 

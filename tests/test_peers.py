@@ -1,12 +1,11 @@
 """The benchmark peers (SciPy, OpenCV+NumPy) compute the same C-DNF as the reference."""
 import numpy as np
 import pytest
+from conftest import small_stimulus
 
 from cdnf_ti import CDNF, CDNFParams
 from cdnf_ti.bench.inputs import basic_frames, standin_video
 from cdnf_ti.bench.peers import PeerCDNF, available_peers
-
-from conftest import small_stimulus
 
 PEERS = ["scipy", "opencv"]
 

@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from cdnf_ti.stimuli.rain import (
-    RainParams, RainyFrames, blend_numpy, blur_numpy, draw_drops, rain_frame_numpy, snr_db, streak_layer_numpy,
+    RainParams,
+    RainyFrames,
+    blur_numpy,
+    draw_drops,
+    rain_frame_numpy,
+    snr_db,
+    streak_layer_numpy,
 )
 
 SHAPE = (240, 426)

@@ -86,10 +86,11 @@ def test_tally_rejects_unknown_outcome():
 def test_cdnf_epsilon_sweep_matches_rerunning_the_model():
     """C-DNF's I_v does not depend on epsilon, so re-thresholding the saved trace
     gives the same first alert as running the model with that epsilon."""
+    from conftest import small_stimulus
+
     from cdnf_ti.experiments.sweep import SweepSpec, sweep_first_alerts
     from cdnf_ti.models import CDNF
     from cdnf_ti.params import CDNFParams
-    from conftest import small_stimulus
 
     frames = list(small_stimulus("dark_looming", size=64).frames())
     base = CDNF().run(frames)

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from conftest import small_stimulus
+
 from cdnf_ti.models import SDNF, SDNFParams
 from cdnf_ti.stimuli.basic import BASIC_STIMULI
 
@@ -103,8 +103,9 @@ def test_model_is_documented_as_a_reconstruction():
 
 
 def test_sweep_alerts_at_default_epsilon_reproduces_the_run_alerts():
-    from cdnf_ti import SDNF
     from conftest import small_stimulus
+
+    from cdnf_ti import SDNF
 
     for name in ("dark_looming", "dark_translating"):
         tr = SDNF().run(small_stimulus(name, size=96).frames())

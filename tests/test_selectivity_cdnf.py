@@ -1,11 +1,10 @@
 """Paper Table I, C-DNF column: looming and receding alert, translating does not."""
 import pytest
+from conftest import small_stimulus
 
 from cdnf_ti import CDNF
 from cdnf_ti.paper import TABLE1
 from cdnf_ti.stimuli.basic import BASIC_STIMULI
-
-from conftest import small_stimulus
 
 
 @pytest.mark.parametrize("name", BASIC_STIMULI)

@@ -6,7 +6,12 @@ import json
 import pytest
 
 from cdnf_ti.experiments.selectivity import (
-    GridTask, agreement_table, grid, make_batches, make_grid_stimulus, selectivity_sweep,
+    GridTask,
+    agreement_table,
+    grid,
+    make_batches,
+    make_grid_stimulus,
+    selectivity_sweep,
 )
 from cdnf_ti.paper import TABLE1
 

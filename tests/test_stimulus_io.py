@@ -8,7 +8,13 @@ from cdnf_ti.errors import InputError
 from cdnf_ti.inputs import GeneratedSource, parse_stim_spec, resolve_input
 from cdnf_ti.stimuli.incoherent import incoherent_stimulus
 from cdnf_ti.stimuli.io import (
-    output_format, read_frames, read_frames_uint8, read_sidecar, sidecar_path, to_uint8, write_frames,
+    output_format,
+    read_frames,
+    read_frames_uint8,
+    read_sidecar,
+    sidecar_path,
+    to_uint8,
+    write_frames,
     write_sidecar,
 )
 from cdnf_ti.stimuli.rain import RainParams, RainyFrames

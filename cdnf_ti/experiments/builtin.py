@@ -13,7 +13,14 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..atomic import atomic_write_json, atomic_write_text
+from ..demo import format_table1
+from ..models import create_model
+from ..models.base import Trace
 from ..paper import TABLE1
+from ..stimuli.basic import BASIC_STIMULI, PAPER_LABELS, basic_stimulus
+from ..stimuli.incoherent import incoherent_stimulus
+from .figures import plot_coherence, plot_selectivity
+from .parallel import TaskFailed, init_worker, map_tasks
 
 #: Coherence degrees of the sweep (paper Fig. 4 goes from 100% down to 5%).
 COHERENCES = (1.0, 0.95, 0.9, 0.8, 0.75, 0.6, 0.5, 0.4, 0.2, 0.05)
@@ -57,13 +64,7 @@ def make_stimulus(name: str, size: int, coherence: float | None = None, seed: in
     """A basic (coherence None) or incoherent stimulus, scaled to ``size`` x ``size`` px."""
     kw = dict(height=size, width=size)  # start half-size: default_start_half_size(size)
     if coherence is None:
-        from ..stimuli.basic import basic_stimulus
-
         return basic_stimulus(name, **kw)
-    try:
-        from ..stimuli.incoherent import incoherent_stimulus
-    except ImportError as e:
-        raise ValueError("incoherent stimuli are not available (cdnf_ti.stimuli.incoherent missing)") from e
     return incoherent_stimulus(name, coherence, seed=seed, **kw)
 
 
@@ -73,9 +74,6 @@ def _frames_of(stim):
 
 def run_stimulus_task(task: StimulusTask) -> dict:
     """Run one model on one stimulus; save the trace; return a summary record."""
-    from ..models import create_model
-    from .parallel import init_worker
-
     if task.backend == "taichi":
         init_worker(task.arch)
     stim = make_stimulus(task.stimulus, task.size, task.coherence, task.seed)
@@ -98,8 +96,6 @@ def _snapshots(name: str, size: int, coherence: float | None, seed: int, k: Sequ
 
 
 def _run(tasks: list[StimulusTask], workers, scheduler, arch, progress, label) -> list[dict]:
-    from .parallel import TaskFailed, map_tasks
-
     out: list[dict | None] = [None] * len(tasks)
     for i, res in map_tasks(run_stimulus_task, tasks, workers=workers, scheduler=scheduler, arch=arch,
                             progress=label if progress else False):
@@ -121,10 +117,6 @@ def table1(models: Sequence[str], out: str | Path, size: int = 160, seed: int = 
     dict
         ``result[model][stimulus] = {"alert", "first_alert", "max_output", ...}``.
     """
-    from ..demo import format_table1
-    from ..models.base import Trace
-    from ..stimuli.basic import BASIC_STIMULI, PAPER_LABELS
-
     out = Path(out)
     tasks = [StimulusTask(m, s, size, None, seed, str(out), backend, arch) for m in models for s in BASIC_STIMULI]
     recs = _run(tasks, workers, scheduler, arch, progress, "table1")
@@ -136,8 +128,6 @@ def table1(models: Sequence[str], out: str | Path, size: int = 160, seed: int = 
           "1 = the model alerts; the paper's value in brackets.\n\n" + format_table1(res) + "\n")
     atomic_write_text(out / "table1.md", md)
     if figures:
-        from .figures import plot_selectivity
-
         traces = {s: {m: Trace.from_csv(t.trace_file, m, res[m][s].get("threshold"))
                       for t in tasks for m in [t.model] if t.stimulus == s and t.trace_file.is_file()}
                   for s in BASIC_STIMULI}
@@ -157,8 +147,6 @@ def coherence_sweep(models: Sequence[str], out: str | Path, size: int = 160,
     dict
         ``table[stimulus][model][coherence] = {"alert", "first_alert", "max_output", ...}``.
     """
-    from ..stimuli.basic import BASIC_STIMULI, PAPER_LABELS
-
     for c in coherences:
         if not (0 < c <= 1):
             raise ValueError(f"coherence must be in (0, 1], got {c}")
@@ -185,8 +173,6 @@ def coherence_sweep(models: Sequence[str], out: str | Path, size: int = 160,
                                                              for m, d in t.items()} for s, t in table.items()}})
     atomic_write_text(out / "coherence.md", coherence_markdown(table, coherences, size))
     if figures:
-        from .figures import plot_coherence
-
         lo = min(coherences)
         snaps = {s: {c: _snapshots(s, size, c, seed, (0.8,))[0] for c in sorted({lo, max(coherences)})}
                  for s in stimuli}
@@ -196,8 +182,6 @@ def coherence_sweep(models: Sequence[str], out: str | Path, size: int = 160,
 
 def coherence_markdown(table: dict, coherences: Sequence[float], size: int | None = None) -> str:
     """Markdown: a row per stimulus x model, a column per coherence; 1 = alerts."""
-    from ..stimuli.basic import PAPER_LABELS
-
     models = list(dict.fromkeys(m for s in table for m in table[s]))
     head = "| Stimulus | Model | " + " | ".join(f"{100 * c:.0f}%" for c in coherences) + " |"
     lines = [f"# Coherence sweep (paper Fig. 4){'' if size is None else f', {size}x{size} px'}", "",

@@ -17,8 +17,19 @@ import sys
 from pathlib import Path
 from typing import Sequence
 
+from ..atomic import output_lock, prepare_output
+from ..cli_common import add_model_options, check_model_options, parse_models, seed_arg
+from ..demo import format_table1
 from ..errors import InputError, UserError
-from ..run import seed_arg
+from ..limits import check_frame_size
+from ..render import render_dataset
+from ..stimuli.basic import BASIC_STIMULI
+from . import builtin
+from .dataset import run_dataset
+from .paramsweep import run_param_sweep
+from .reports import pct, table2_markdown
+from .scoring import Padding
+from .selectivity import agreement_markdown, selectivity_sweep
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 
@@ -44,8 +55,6 @@ def _add_parallel(ap: argparse.ArgumentParser) -> None:
 
 
 def _add_dataset_options(ap: argparse.ArgumentParser, rain_default: str) -> None:
-    from ..run import add_model_options
-
     ap.add_argument("--labels", default=None, help="labels CSV (default: DIR/labels.csv)")
     add_model_options(ap, default_models="cdnf" if rain_default == "none" else "all")
     ap.add_argument("--rain", choices=("none", "only", "both"), default=rain_default,
@@ -58,13 +67,6 @@ def _add_dataset_options(ap: argparse.ArgumentParser, rain_default: str) -> None
 
 
 def _dataset(args, folder: Path, out: Path) -> int:
-    from ..run import parse_models
-    from .dataset import run_dataset
-    from .reports import table2_markdown
-    from .scoring import Padding
-
-    from ..run import check_model_options
-
     models = parse_models(args.models)
     check_model_options(args)
     run = run_dataset(folder, args.labels, out, models=models, rain=args.rain,
@@ -84,8 +86,6 @@ def _dataset(args, folder: Path, out: Path) -> int:
         print(f"error: {e['error']} [{e['model']}, {e['condition']}]", file=sys.stderr)
 
     if getattr(args, "render", False):
-        from ..render import render_dataset
-
         movies = render_dataset(run, folder, progress=not args.no_progress)
         print(f"{len(movies)} field movies in {out}/movies/", file=sys.stderr)
     if run.failed:
@@ -96,8 +96,6 @@ def _dataset(args, folder: Path, out: Path) -> int:
 
 def headline(run) -> list[str]:
     """One line per model and condition: accuracy, how many clips were scored and how many failed."""
-    from .reports import pct
-
     lines = []
     for m in run.models:
         for c in run.conditions:
@@ -112,10 +110,6 @@ def headline(run) -> list[str]:
 
 
 def _param_sweep(args) -> int:
-    from ..run import parse_models
-    from .paramsweep import run_param_sweep
-    from .scoring import Padding
-
     models = parse_models(args.models)
     if len(models) != 1:
         raise UserError("experiment sweep takes exactly one --model (its parameters are swept)")
@@ -159,9 +153,6 @@ def dataset_main(argv: Sequence[str]) -> int:
 
 
 def _selectivity(args) -> int:
-    from ..run import parse_models
-    from .selectivity import agreement_markdown, selectivity_sweep
-
     coh = None
     if args.coherences:
         try:
@@ -187,9 +178,6 @@ def _selectivity(args) -> int:
 
 def experiment_main(argv: Sequence[str]) -> int:
     """``python -m cdnf_ti.run experiment table1|coherence|selectivity|table2 [...]``."""
-    from ..run import add_model_options, parse_models
-    from . import builtin
-
     ap = argparse.ArgumentParser(prog="python -m cdnf_ti.run experiment",
                                  description="Regenerate the paper's experiments.")
     sub = ap.add_subparsers(dest="which", required=True, metavar="{table1,coherence,selectivity,table2,sweep}")
@@ -241,10 +229,6 @@ def experiment_main(argv: Sequence[str]) -> int:
     _add_dataset_options(p4, rain_default="none")
     args = ap.parse_args(list(argv))
 
-    from ..atomic import output_lock, prepare_output
-    from ..limits import check_frame_size
-    from ..run import check_model_options
-
     if args.which in ("sweep", "selectivity"):
         check_model_options(args)
         with output_lock(prepare_output(args.out)):
@@ -269,8 +253,6 @@ def _stimulus_experiment(args, models, builtin) -> int:
     kw = dict(size=args.size, seed=args.seed, workers=args.workers, scheduler=args.scheduler,
               backend=args.backend, arch=args.arch, progress=not args.no_progress, figures=not args.no_figures)
     if args.which == "table1":
-        from ..demo import format_table1
-
         res = builtin.table1(models, args.out, **kw)
         print(format_table1(res))
         errs = [r for d in res.values() for r in d.values() if r.get("error")]
@@ -289,8 +271,6 @@ def _stimulus_experiment(args, models, builtin) -> int:
             raise UserError(f"--coherences: coherence must be in (0, 1], got {bad_c[0]:g}")
         stimuli = [s.strip() for s in args.stimuli.split(",")] if args.stimuli else None
         if stimuli:
-            from ..stimuli.basic import BASIC_STIMULI
-
             bad = [s for s in stimuli if s not in BASIC_STIMULI]
             if bad:
                 raise UserError(f"unknown stimulus {bad[0]!r}; choose from {', '.join(BASIC_STIMULI)}")

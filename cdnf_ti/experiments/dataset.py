@@ -15,36 +15,33 @@ different window padding re-scores without running any model.
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 import warnings
-import zlib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from ..atomic import atomic_write_json, output_lock, prepare_output, remove_stale_temps
 from ..errors import InputError, UserError
+from ..frames import iter_grey, open_source
+from ..models import create_model
+from ..models.base import NotConvergedWarning, run_models
+from ..stimuli.rain import RainParams, RainyFrames
+from . import parallel  # parallel.map_tasks looked up at call time (tests replace it)
 from .labels import ClipLabel, read_labels, unlabelled_videos, validate_dataset
-from .scoring import Padding, score_clip
-
-CONDITIONS = ("clean", "rain")
-RAIN_CHOICES = {"none": ("clean",), "only": ("rain",), "both": ("clean", "rain")}
-
-#: Columns of results.csv, in order.
-RESULT_COLUMNS = (
-    "clip", "model", "condition", "label", "window_start", "window_end", "window_lo", "window_hi",
-    "contact_frame", "frames", "fps", "first_alert", "first_alert_s", "outcome", "fn_reason",
-    "lead_time_ms", "output_name", "max_output", "threshold", "snr_db", "unconverged_frames",
-    "seconds", "error",
+from .layout import (
+    CONDITIONS as CONDITIONS,  # re-exported: dataset.py was their home
+    RAIN_CHOICES as RAIN_CHOICES,
+    RESULT_COLUMNS as RESULT_COLUMNS,
+    fingerprint as fingerprint,
+    load_meta as load_meta,
+    rain_seed as rain_seed,
+    trace_path as trace_path,
 )
-
-
-def rain_seed(seed: int, clip: str) -> int:
-    """The rain seed of one clip: a function of the run seed and the clip name only
-    (so it does not depend on the order or place the clip runs)."""
-    return (int(seed) * 1_000_003 + zlib.crc32(clip.encode("utf-8"))) % (2**32)
+from .parallel import TaskFailed, init_worker
+from .reports import write_reports
+from .scoring import Padding, score_clip
 
 
 @dataclass(frozen=True)
@@ -79,63 +76,11 @@ class ClipTask:
     rain_params: dict | None = None
 
 
-def trace_path(out: str | os.PathLike, condition: str, clip: str, model: str, ext: str = "csv") -> Path:
-    """``OUT/traces/<condition>/<clip>.<model>.<ext>``."""
-    return Path(out) / "traces" / condition / f"{clip}.{model}.{ext}"
-
-
-def fingerprint(path: str | os.PathLike, condition: str, model: str, seed: int, backend: str,
-                rain_params: dict | None) -> dict:
-    """What a saved result depends on: the input file (path, size, mtime), the model and
-    backend, the package version and, for rain, the seed and rain settings.
-
-    A finished result is reused on a rerun only when its fingerprint is the same, so
-    changing ``--seed``, the rain settings, the backend, the input or cdnf_ti itself
-    recomputes it.
-    """
-    from .. import __version__
-
-    st = os.stat(path)
-    fp: dict[str, Any] = {"source": str(path), "source_size": st.st_size, "source_mtime_ns": st.st_mtime_ns,
-                          "model": model, "backend": backend, "condition": condition, "version": __version__}
-    if condition == "rain":
-        fp.update(seed=seed, rain_params=rain_params or {})
-    return json.loads(json.dumps(fp))  # the form it takes after a JSON round trip
-
-
-def load_meta(out: str | os.PathLike, condition: str, clip: str, model: str,
-              expected: dict | None = None) -> dict | None:
-    """The finished record of (clip, model, condition), or None if not finished.
-
-    With ``expected`` (a :func:`fingerprint`), a record made with other options or
-    another input counts as not finished.
-    """
-    jp = trace_path(out, condition, clip, model, "json")
-    cp = trace_path(out, condition, clip, model, "csv")
-    if not (jp.is_file() and cp.is_file()):
-        return None
-    try:
-        meta = json.loads(jp.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    if not isinstance(meta, dict) or meta.get("model") != model:
-        return None
-    if expected is not None and meta.get("fingerprint") != expected:
-        return None
-    return meta
-
-
 def _frames(task: ClipTask, src):
     """The frame stream of a task (grey; rainy for the rain condition) and the rain object."""
-    from ..frames import iter_grey
-
     grey = iter_grey(src)
     if task.condition == "clean":
         return grey, None
-    try:
-        from ..stimuli.rain import RainParams, RainyFrames
-    except ImportError as e:
-        raise RuntimeError("synthetic rain is not available (cdnf_ti.stimuli.rain missing)") from e
     params = RainParams(**task.rain_params) if task.rain_params else None
     rain = RainyFrames(grey, params, seed=rain_seed(task.seed, task.clip),
                        backend="numpy" if task.backend == "numpy" else "taichi")
@@ -158,11 +103,6 @@ def run_clip_task(task: ClipTask) -> list[dict]:
         clip that cannot be opened or decoded gives records with ``error`` set
         for every model; nothing is saved for them, so a rerun tries again.
     """
-    from ..frames import open_source
-    from ..models import create_model
-    from ..models.base import NotConvergedWarning, run_models
-    from .parallel import init_worker
-
     if task.backend == "taichi":
         init_worker(task.arch)
     base = {"clip": task.clip, "condition": task.condition}
@@ -222,8 +162,6 @@ def describe_task(task: ClipTask, records: Any) -> str:
     head = f"{task.clip} [{', '.join(task.models)}, {task.condition}]"
     if records is None:
         return head
-    from .parallel import TaskFailed
-
     if isinstance(records, TaskFailed):
         return f"{head}: error: {records}"
     errs = [r for r in records if r.get("error")]
@@ -361,12 +299,6 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
     models = list(dict.fromkeys(models))
     if not models:
         raise UserError("no model named")
-    if "rain" in conditions:
-        try:
-            from ..stimuli import rain as _rain  # noqa: F401
-        except ImportError:
-            raise UserError("synthetic rain is not available in this installation "
-                             "(cdnf_ti.stimuli.rain missing); use --rain none") from None
     out = prepare_output(out)  # before any work: a folder that cannot be written fails now
     files = {clip: Path(f).resolve() for clip, f in files.items()}  # workers may run elsewhere
     with output_lock(out):
@@ -384,8 +316,6 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
 
 def _run_locked(folder, labels_path, labels, files, out, models, conditions, padding, seed, workers, scheduler,
                 backend, arch, progress, figures, rain_params, on_record) -> DatasetRun:
-    from .reports import write_reports
-
     metas: dict[tuple[str, str, str], dict] = {}
     tasks: list[ClipTask] = []
     skipped = 0
@@ -403,10 +333,8 @@ def _run_locked(folder, labels_path, labels, files, out, models, conditions, pad
             if todo:
                 tasks.append(ClipTask(lab.clip, str(files[lab.clip]), cond, tuple(todo), str(out), seed,
                                       backend, arch, rain_params))
-    from .parallel import TaskFailed, map_tasks
-
     ran = 0
-    for i, res in map_tasks(run_clip_task, tasks, workers=workers, scheduler=scheduler, arch=arch,
+    for i, res in parallel.map_tasks(run_clip_task, tasks, workers=workers, scheduler=scheduler, arch=arch,
                             progress="clips" if progress else False, describe=describe_task):
         t = tasks[i]
         recs = ([dict(clip=t.clip, model=m, condition=t.condition, error=f"{t.path}: {res}") for m in t.models]

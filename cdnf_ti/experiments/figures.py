@@ -10,12 +10,18 @@
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Mapping, Sequence
 
 import numpy as np
+from tqdm import tqdm
 
-from ..atomic import atomic_write
+from ..atomic import atomic_write, atomic_write_text
+from ..models import get_model_class
+from ..paper import TABLE2
+from .clipscores import roc_envelope
+from .layout import trace_path
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..models.base import Trace
@@ -29,8 +35,7 @@ WINDOW_COLOUR = "#f4a6c0"  # the paper shades the collision period pink
 
 
 def _plt():
-    import sys
-
+    # lazy: optional heavy dependency, needed only when a figure is drawn
     import matplotlib
 
     if "matplotlib.pyplot" not in sys.modules and not os.environ.get("MPLBACKEND"):
@@ -63,8 +68,6 @@ def _alert_rug(ax, trace: "Trace", t: np.ndarray, y: float, **style) -> None:
 def _count_threshold(model: str) -> float | None:
     """The spike-count threshold ``n_ts`` of an LGMD-family model (None for others)."""
     try:
-        from ..models import get_model_class
-
         cls = get_model_class(model)
         return float(cls.params_type().n_ts) if hasattr(cls.params_type(), "n_ts") else None
     except Exception:  # noqa: BLE001 - a model we do not know: no count panel
@@ -202,8 +205,6 @@ def plot_roc(path: str | os.PathLike, scores: Mapping[str, Mapping[str, Mapping]
             if not d:
                 continue
             r = d["roc"]
-            from .clipscores import roc_envelope
-
             xs, ys = roc_envelope(r["hit_rate"], r["false_alarm_rate"])
             auc = d.get("auc")
             colour = MODEL_COLOURS[k % len(MODEL_COLOURS)]
@@ -265,8 +266,6 @@ def plot_threshold_sweep(path: str | os.PathLike, rows: Sequence[Mapping], specs
 def plot_accuracy(path: str | os.PathLike, results: Mapping[str, Mapping[str, Mapping | None]],
                   models: Sequence[str], conditions: Sequence[str]) -> Path:
     """Bars: accuracy per model and condition; diamonds: the paper's Table II."""
-    from ..paper import TABLE2
-
     plt = _plt()
     fig, ax = plt.subplots(figsize=(1.6 + 1.5 * len(models), 3.4))
     w = 0.8 / max(1, len(conditions))
@@ -301,10 +300,6 @@ def _up_to_date(png: Path, inputs: Sequence[Path]) -> bool:
 
 def dataset_figures(run: "DatasetRun", traces: Mapping, specs: Mapping, progress: bool = False) -> list[Path]:
     """All figures of a dataset run into ``OUT/figures`` (per-clip figures reused when up to date)."""
-    from tqdm import tqdm
-
-    from .dataset import trace_path
-
     figdir = Path(run.out) / "figures"
     made: list[Path] = []
     fps = {r["clip"]: float(r["fps"]) for r in run.rows if not r.get("error") and r.get("fps") not in ("", None)}
@@ -323,8 +318,6 @@ def dataset_figures(run: "DatasetRun", traces: Mapping, specs: Mapping, progress
             made.append(png)
             continue
         made.append(plot_clip(png, lab, tr, run.models, run.conditions, fps.get(lab.clip, 30.0), run.padding))
-        from ..atomic import atomic_write_text
-
         atomic_write_text(stamp, key)
     if run.sweep:
         made.append(plot_threshold_sweep(figdir / "threshold_sweep.png", run.sweep, specs))

@@ -9,12 +9,14 @@ raised before any model work starts.
 from __future__ import annotations
 
 import csv
+import glob
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Iterable
 
 from ..errors import InputError
+from ..frames import open_source
 
 #: Label values and the class each maps to (``near-miss`` counts as non-collision).
 LABEL_VALUES = {"collision": True, "non-collision": False, "noncollision": False, "non_collision": False,
@@ -143,7 +145,7 @@ def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
     for line, r in enumerate(rows[1:], start=2):
         def get(name: str) -> str:
             i = col.get(name)
-            return r[i] if i is not None and i < len(r) else ""
+            return r[i] if i is not None and i < len(r) else ""  # noqa: B023 - called in this iteration only
 
         clip = get("clip").strip()
         try:
@@ -210,15 +212,11 @@ def find_clip(folder: str | os.PathLike, clip: str) -> Path | None:
 
 def glob_escape(name: str) -> str:
     """Escape glob metacharacters in a file name."""
-    import glob
-
     return glob.escape(name)
 
 
 def frame_count(path: Path) -> int | None:
     """The clip's frame count as the container reports it, or ``None`` if unknown/unreadable."""
-    from ..frames import open_source
-
     try:
         return open_source(path).n_frames
     except InputError:

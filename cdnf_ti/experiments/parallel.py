@@ -9,6 +9,7 @@ themselves (:func:`init_worker`).
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import multiprocessing as mp
 import os
 import signal
@@ -20,7 +21,10 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Callable, Iterator, Sequence
 
+from tqdm import tqdm
+
 from ..errors import UserError
+from ..taichi_runtime import current_arch, ensure_taichi
 
 
 class TaskFailed(Exception):
@@ -48,8 +52,6 @@ def init_worker(arch: str | None = "cpu", threads: int | None = None) -> None:
         Taichi CPU thread-pool size for this process (``TI_CPU_MAX_NUM_THREADS``);
         None leaves Taichi's default (all cores).
     """
-    from ..taichi_runtime import current_arch, ensure_taichi
-
     if current_arch() is None and threads:
         os.environ["TI_CPU_MAX_NUM_THREADS"] = str(int(threads))
     if arch is not None:
@@ -149,8 +151,6 @@ class _Reporter:
         self.tty = self.enabled and _isatty(sys.stderr)
         self.bar = None
         if self.tty and n:
-            from tqdm import tqdm
-
             self.bar = tqdm(total=n, desc=self.label, unit="task", file=sys.stderr)
 
     def _text(self, i: int, res: Any) -> str:
@@ -254,8 +254,6 @@ def die_with_parent(parent_pid: int, poll_s: float = 1.0) -> None:
     """
     if sys.platform.startswith("linux"):
         try:
-            import ctypes
-
             libc = ctypes.CDLL(None, use_errno=True)
             libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
         except (OSError, AttributeError):  # pragma: no cover - no libc prctl
@@ -414,6 +412,7 @@ def _dask_task(fn, task, arch):
 
 def _dask(fn, tasks, scheduler, arch, rep, connect_timeout=20.0) -> Iterator[tuple[int, Any]]:
     try:
+        # lazy: heavy dependency, needed only with --scheduler
         from distributed import Client, as_completed
     except ImportError as e:  # pragma: no cover - dask[distributed] is a dependency
         raise UserError("--scheduler needs dask.distributed (pip install 'dask[distributed]')") from e

@@ -23,6 +23,7 @@ Output: ``OUT/param_sweep.csv``, ``OUT/param_sweep.json``, ``OUT/param_sweep.md`
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import itertools
 import json
 import math
@@ -33,10 +34,22 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
+import cv2
 import numpy as np
 
 from ..atomic import atomic_write_json
 from ..errors import InputError, UserError
+from ..frames import iter_grey, open_source
+from ..models import create_model, get_model_class
+from ..models.base import Trace
+from ..stimuli.rain import RainyFrames
+from .clipscores import choose_level, correctness_matrix, cross_validated_accuracy, roc
+from .labels import read_labels, validate_dataset
+from .layout import RAIN_CHOICES, fingerprint, load_meta, rain_seed, trace_path
+from .parallel import TaskFailed, map_tasks
+from .scoring import Padding, score_clip
+from .sweep import sweep_first_alerts, sweep_spec
+from .sweep_reports import write_param_sweep_reports
 
 MAX_SETTINGS = 10_000
 
@@ -155,8 +168,6 @@ def build_grid(model: str, param_specs: Sequence[str]) -> tuple[type, list[Param
     ValueError
         One line naming the bad ``--param`` or the first invalid combination.
     """
-    from ..models import get_model_class
-
     cls = get_model_class(model)
     ptype = cls.params_type
     if not dataclasses.is_dataclass(ptype):
@@ -231,8 +242,6 @@ def setting_folder(out: str | os.PathLike, key: str) -> Path:
 
 def task_fingerprint(task: SweepTask) -> dict:
     """The dataset fingerprint of the input plus the setting and the downscale factor."""
-    from .dataset import fingerprint
-
     fp = fingerprint(task.path, task.condition, task.model, task.seed, task.backend, None)
     fp["params"] = {k: v for k, v in task.setting}
     fp["downscale"] = task.downscale
@@ -240,8 +249,6 @@ def task_fingerprint(task: SweepTask) -> dict:
 
 
 def _resized(frames, factor: float):
-    import cv2
-
     for f in frames:
         h, w = f.shape[:2]
         yield cv2.resize(f, (max(2, round(w * factor)), max(2, round(h * factor))), interpolation=cv2.INTER_AREA)
@@ -255,10 +262,6 @@ def run_sweep_task(task: SweepTask) -> dict:
     dict
         The record (``error`` empty on success).
     """
-    from ..frames import iter_grey, open_source
-    from ..models import create_model, get_model_class
-    from .dataset import load_meta, rain_seed, trace_path
-
     base = dict(clip=task.clip, model=task.model, condition=task.condition, key=task.key)
     sf = setting_folder(task.out, task.key)
     try:
@@ -268,8 +271,6 @@ def run_sweep_task(task: SweepTask) -> dict:
         model = create_model(task.model, params, backend=task.backend, arch=task.arch, fps=src.fps)
         frames = iter_grey(src)
         if task.condition == "rain":
-            from ..stimuli.rain import RainyFrames
-
             frames = iter(RainyFrames(frames, None, seed=rain_seed(task.seed, task.clip),
                                       backend="numpy" if task.backend == "numpy" else "taichi"))
         if task.downscale != 1.0:
@@ -338,12 +339,6 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
     ValueError, InputError
         Bad grid, bad labels, bad option: before any task runs.
     """
-    from ..models import get_model_class
-    from .dataset import RAIN_CHOICES, load_meta
-    from .labels import read_labels, validate_dataset
-    from .parallel import TaskFailed, map_tasks
-    from .scoring import Padding
-
     padding = padding or Padding()
     if rain not in RAIN_CHOICES:
         raise UserError(f"--rain must be one of {', '.join(RAIN_CHOICES)}, got {rain!r}")
@@ -383,8 +378,6 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
                     tasks.append(t)
     ran = 0
     errors = []
-    import inspect
-
     extra = {}
     if "describe" in inspect.signature(map_tasks).parameters:  # progress lines naming the setting
         extra["describe"] = describe_task
@@ -400,8 +393,6 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
             ran += 1
     rows = evaluate(out, name, settings, conditions, labels, padding, folds, seed)
     run = ParamSweepRun(name, axes, settings, conditions, rows, records, out, ran, skipped, errors)
-    from .sweep_reports import write_param_sweep_reports
-
     write_param_sweep_reports(run, labels, padding, folds, seed, figures=figures, html=html)
     return run
 
@@ -418,12 +409,6 @@ def evaluate(out: Path, model: str, settings: Sequence[dict], conditions: Sequen
         ``cv_accuracy``, ``cv_scheme``, ``best_in_sample_accuracy``,
         ``best_in_sample_level``, ``alert_parameter``, ``errors``.
     """
-    from ..models.base import Trace
-    from .clipscores import cross_validated_accuracy, roc
-    from .dataset import trace_path
-    from .scoring import score_clip
-    from .sweep import sweep_first_alerts, sweep_spec
-
     labs = {lab.clip: lab for lab in labels}
     rows = []
     for s in settings:
@@ -458,8 +443,6 @@ def evaluate(out: Path, model: str, settings: Sequence[dict], conditions: Sequen
                    for c, tr in traces.items()]
             r = roc(fas, labs, levels, padding)
             cv = cross_validated_accuracy(fas, labs, levels, padding, folds=folds, seed=seed, default=default)
-            from .clipscores import choose_level, correctness_matrix
-
             _, cm = correctness_matrix(fas, labs, padding)
             jb = choose_level(cm, levels, default)
             row.update(alert_parameter=spec.parameter, accuracy=float(np.mean(own)), auc=r.auc,

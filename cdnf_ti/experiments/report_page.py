@@ -11,17 +11,20 @@ if TYPE_CHECKING:  # pragma: no cover
     from .dataset import DatasetRun
 
 
-def write_dataset_html(run: "DatasetRun", summary: Mapping, specs: Mapping, pngs: Sequence[Path] = ()) -> Path:
+def write_dataset_html(run: "DatasetRun", summary: Mapping, markdown: str, pngs: Sequence[Path] = ()) -> Path:
     """Write ``OUT/report.html``: the summary's text and tables, then ROC, sweep, accuracy and per-clip figures.
 
     Figures are embedded (base64 PNG), so the page is one file readable offline.
-    """
-    from .reports import summary_markdown
 
+    Parameters
+    ----------
+    markdown : str
+        The run's summary.md text (:func:`cdnf_ti.experiments.reports.summary_markdown`).
+    """
     out = Path(run.out)
     page = Page(f"cdnf_ti dataset run: {Path(str(summary.get('dataset', ''))).name or 'dataset'}")
     page.paragraph(f"Any alert level marked 'in-sample' or 'best' is {IN_SAMPLE_NOTE}.", note=True)
-    add_markdown(page, summary_markdown(run, summary, specs))
+    add_markdown(page, markdown)
     figdir = out / "figures"
     named = [(figdir / "accuracy.png", "Accuracy per model and condition (paper Table II: diamonds)"),
              (figdir / "roc.png", "Clip-level ROC over the alert level (AUC in the legend)"),

@@ -1,16 +1,38 @@
 """Reports of a dataset run: results.csv, threshold_sweep.csv, summary.md and summary.json."""
 from __future__ import annotations
 
-import csv
-import io
-import math
+import dataclasses
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
+
+import numpy as np
 
 from ..atomic import atomic_write_json, atomic_write_text
+from ..models.base import Trace
 from ..paper import TABLE2
-from .clipscores import IN_SAMPLE_NOTE, never_alerts_accuracy, pct_ci
+from .clipscores import (
+    IN_SAMPLE_NOTE,
+    bootstrap_accuracy,
+    choose_level,
+    correctness_matrix,
+    cross_validated_accuracy,
+    lead_times,
+    never_alerts_accuracy,
+    pct_ci,
+    roc,
+)
+from .figures import dataset_figures
+from .htmlreport import markdown_table
+from .layout import RESULT_COLUMNS, trace_path
+from .paramsweep import alert_levels
+from .report_page import write_dataset_html
 from .scoring import tally
+from .sweep import sweep_dataset, sweep_first_alerts, sweep_spec
+from .tables import (
+    csv_text as csv_text,  # re-exported: their old home
+    pct as pct,
+    read_results as read_results,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
     from .dataset import DatasetRun
@@ -20,44 +42,8 @@ SWEEP_COLUMNS = ("model", "condition", "parameter", "value", "is_default", "TP",
                  "FN_late", "FN_none", "clips", "accuracy", "hits", "false_alarms", "method")
 
 
-def _cell(v: Any) -> str:
-    if v is None:
-        return ""
-    if isinstance(v, bool):
-        return "1" if v else "0"
-    if isinstance(v, float):
-        if not math.isfinite(v):
-            return ""
-        return f"{v:.6g}"
-    return str(v)
-
-
-def csv_text(rows: Iterable[Mapping], columns: Sequence[str]) -> str:
-    """CSV text of ``rows`` restricted to ``columns`` (None -> empty cell)."""
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(columns)
-    for r in rows:
-        w.writerow([_cell(r.get(c)) for c in columns])
-    return buf.getvalue()
-
-
-def read_results(path: str | Path) -> list[dict]:
-    """Read a results.csv back (all values as strings)."""
-    with open(path, newline="", encoding="utf-8") as f:
-        return list(csv.DictReader(f))
-
-
-def pct(acc: float | None) -> str:
-    """``0.7714`` -> ``"77.14%"``; None -> ``"n/a"``."""
-    return "n/a" if acc is None else f"{100.0 * acc:.2f}%"
-
-
 def load_traces(run: "DatasetRun") -> dict:
     """The saved traces of every successful row: (clip, model, condition) -> Trace."""
-    from ..models.base import Trace
-    from .dataset import trace_path
-
     traces = {}
     for r in run.rows:
         if r.get("error"):
@@ -71,8 +57,6 @@ def load_traces(run: "DatasetRun") -> dict:
 
 def threshold_sweep(run: "DatasetRun", traces: Mapping) -> tuple[list[dict], dict]:
     """Sweep rows and the spec of each model (see :mod:`cdnf_ti.experiments.sweep`)."""
-    from .sweep import sweep_dataset, sweep_spec
-
     labels = {lab.clip: lab for lab in run.labels}
     fps = {r["clip"]: float(r["fps"]) for r in run.rows if not r.get("error") and r.get("fps") not in ("", None)}
     specs = {}
@@ -96,15 +80,6 @@ def honest_scores(run: "DatasetRun", traces: Mapping, specs: Mapping, seed: int 
         chosen on the scored clips: in-sample), ``lead_times`` and ``held``
         (share of frames a model was held at rest, for models with such a state).
     """
-    import dataclasses
-
-    import numpy as np
-
-    from .clipscores import (IN_SAMPLE_NOTE, bootstrap_accuracy, choose_level, correctness_matrix,
-                             cross_validated_accuracy, lead_times, roc)
-    from .paramsweep import alert_levels
-    from .sweep import sweep_first_alerts
-
     labels = {lab.clip: lab for lab in run.labels}
     out: dict = {}
     for m in run.models:
@@ -322,8 +297,6 @@ def scores_table(run: "DatasetRun", summary: Mapping) -> tuple[list[str], list[l
                          "" if not held else f"{100 * held['share']:.1f}% ({held['held_frames']}/{held['frames']})"])
     base = summary.get("never_alerts_accuracy")
     if base is not None:
-        from .clipscores import bootstrap_accuracy
-
         n = summary["clips"]
         ci = bootstrap_accuracy([not lab.collision for lab in run.labels], seed=summary.get("seed", 0))
         rows.append(["never alerts (baseline)", "any", pct_ci(ci), "n/a", pct(base), "", "0", "0", ""])
@@ -338,8 +311,6 @@ def scores_markdown(run: "DatasetRun", summary: Mapping) -> list[str]:
         return []
     any_cv = next((d["cv"]["scheme"] for m in sc.values() for d in m.values()), "leave-one-out")
     header, rows = scores_table(run, summary)
-    from .htmlreport import markdown_table
-
     L = ["", "## Threshold-free and out-of-sample scores", "",
          f"- Accuracy at each model's own threshold, with a seeded bootstrap 95% interval over clips "
          f"(2000 resamples, seed {summary.get('seed', 0)}); with {summary['clips']} clips one clip moves accuracy "
@@ -364,8 +335,6 @@ def scores_markdown(run: "DatasetRun", summary: Mapping) -> list[str]:
 def write_reports(run: "DatasetRun", dataset: str, labels_path: str, seed: int, figures: bool = True,
                   progress: bool = False) -> None:
     """Write results.csv, threshold_sweep.csv, summary.md/json and (optionally) the figures."""
-    from .dataset import RESULT_COLUMNS
-
     out = Path(run.out)
     atomic_write_text(out / "results.csv", csv_text(run.rows, RESULT_COLUMNS))
     traces = load_traces(run)
@@ -374,12 +343,9 @@ def write_reports(run: "DatasetRun", dataset: str, labels_path: str, seed: int, 
     scores = honest_scores(run, traces, specs, seed=seed)
     run.summary = summary_dict(run, specs, dataset, labels_path, seed, scores)
     atomic_write_json(out / "summary.json", run.summary)
-    atomic_write_text(out / "summary.md", summary_markdown(run, run.summary, specs))
+    markdown = summary_markdown(run, run.summary, specs)
+    atomic_write_text(out / "summary.md", markdown)
     pngs: list = []
     if figures:
-        from .figures import dataset_figures
-
         pngs = dataset_figures(run, traces, specs, progress=progress)
-    from .report_page import write_dataset_html
-
-    write_dataset_html(run, run.summary, specs, pngs)
+    write_dataset_html(run, run.summary, markdown, pngs)

@@ -30,16 +30,26 @@ at one frame size (:class:`GridBatch`) on local processes or Dask
 """
 from __future__ import annotations
 
+import csv
 import hashlib
+import io
 import json
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
+import numpy as np
+
 from ..atomic import atomic_write_json, atomic_write_text
 from ..errors import UserError
+from ..models import create_model
 from ..paper import TABLE1
+from ..stimuli.basic import basic_stimulus
+from ..stimuli.grating import GratingStimulus
+from ..stimuli.incoherent import IncoherentStimulus
+from .figures import _plt, save_figure
+from .parallel import TaskFailed, _one_line, init_worker, map_tasks
 
 BASE_SIZE = {"quick": 120, "full": 240}
 CLASSES = ("looming", "receding", "translating", "grating")
@@ -201,16 +211,10 @@ def make_grid_stimulus(point: GridPoint, seed: int = 0):
     kw = point.kwargs
     coherence = kw.pop("coherence", None)
     if point.cls == "grating":
-        from ..stimuli.grating import GratingStimulus
-
         return GratingStimulus(seed=seed, **kw)
-    from ..stimuli.basic import basic_stimulus
-
     base = basic_stimulus(point.stimulus, **kw)
     if coherence is None:
         return base
-    from ..stimuli.incoherent import IncoherentStimulus
-
     return IncoherentStimulus(base, coherence, seed)
 
 
@@ -246,9 +250,6 @@ class GridTask:
 
 def run_grid_task(task: GridTask) -> dict:
     """Run one model on one grid stimulus; write its trace and result file; return the result."""
-    from ..models import create_model
-    from .parallel import init_worker
-
     if task.backend == "taichi":
         init_worker(task.arch)
     stim = make_grid_stimulus(task.point, task.seed)
@@ -281,8 +282,6 @@ class GridBatch:
 
 def run_grid_batch(batch: GridBatch) -> list[dict]:
     """Run every task of a batch (a failed task gives an error record, the rest go on)."""
-    from .parallel import _one_line
-
     out = []
     for t in batch.tasks:
         try:
@@ -332,8 +331,6 @@ def selectivity_sweep(models: Sequence[str], out: str | Path, which: str = "quic
     dict
         ``{"rows": [...], "agreement": {model: {class: (matches, total)}}, "ran": int, "reused": int}``.
     """
-    from .parallel import TaskFailed, map_tasks
-
     out = Path(out)
     pts = grid(which, coherences)
     if classes:
@@ -375,9 +372,6 @@ def selectivity_sweep(models: Sequence[str], out: str | Path, which: str = "quic
 
 
 def _write_csv(path: Path, rows: list[dict]) -> None:
-    import csv
-    import io
-
     cols = ["model", "class", "polarity", "stimulus", "parameter", "value", "expected", "alert", "match",
             "first_alert", "frames", "max_output", "error", "key"]
     buf = io.StringIO()
@@ -484,10 +478,6 @@ def selectivity_markdown(rows: list[dict], which: str = "quick") -> str:
 def plot_selectivity_grid(path: str | Path, rows: list[dict], dpi: int = 110) -> Path:
     """A panel per stimulus class: grid points (rows) x models (columns); green = alert matches
     Table I, red = differs, grey = no Table I entry; the cell shows the alert (1/0)."""
-    import numpy as np
-
-    from .figures import _plt, save_figure
-
     plt = _plt()
     models = list(dict.fromkeys(r["model"] for r in rows))
     cols = class_columns(rows)

@@ -21,8 +21,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from ..models import get_model_class
 from ..models.base import Sweepable, Trace
 from ..models.cdnf import CDNF
+from .scoring import Tally, score_clip
 
 #: C-DNF's epsilon range (the issue: 0 to 0.02).
 CDNF_EPSILONS = tuple(CDNF.sweep_values)
@@ -54,8 +56,6 @@ class SweepSpec:
 
 
 def _class(model: str):
-    from ..models import get_model_class
-
     return get_model_class(model)
 
 
@@ -152,8 +152,6 @@ def sweep_dataset(specs: Mapping[str, SweepSpec], traces: Mapping[tuple[str, str
         accuracy, hits (= TP), false_alarms (= FP + FN_early: alerts on a
         non-collision clip or before the collision window)``.
     """
-    from .scoring import Tally, score_clip
-
     rows: list[dict] = []
     conditions = sorted({k[2] for k in traces}, key=lambda c: (c != "clean", c))
     for model, spec in specs.items():

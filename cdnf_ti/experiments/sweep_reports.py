@@ -1,15 +1,18 @@
 """Reports of a parameter sweep: param_sweep.csv/json/md, figures and report.html."""
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from ..atomic import atomic_write_json, atomic_write_text
+from ..models import get_model_class
 from .clipscores import IN_SAMPLE_NOTE, never_alerts_accuracy
+from .figures import _plt, save_figure
 from .htmlreport import Page, markdown_table
-from .reports import csv_text, pct
+from .tables import csv_text, pct
 
 if TYPE_CHECKING:  # pragma: no cover
     from .paramsweep import ParamSweepRun
@@ -44,8 +47,6 @@ def table_rows(run: "ParamSweepRun") -> tuple[list[str], list[list]]:
 
 def plot_param_sweep(path: Path, run: "ParamSweepRun", metric: str = "cv_accuracy") -> list[Path]:
     """Heat maps (two swept parameters) or curves (one, or per parameter) of accuracy, CV accuracy and AUC."""
-    from .figures import _plt, save_figure
-
     plt = _plt()
     made = []
     names = [a.name for a in run.axes]
@@ -110,10 +111,6 @@ def plot_param_sweep(path: Path, run: "ParamSweepRun", metric: str = "cv_accurac
 
 
 def _defaults(model: str) -> dict:
-    import dataclasses
-
-    from ..models import get_model_class
-
     try:
         return dataclasses.asdict(get_model_class(model).params_type())
     except Exception:  # noqa: BLE001 - only for a marker
@@ -149,9 +146,11 @@ def write_param_sweep_reports(run: "ParamSweepRun", labels: Sequence, padding, f
     })
     header, rows = table_rows(run)
     n_col = sum(1 for lab in labels if lab.collision)
+    def axis_text(a) -> str:
+        return f"{a.name} = " + ", ".join(f"{v:g}" if not isinstance(v, str) else v for v in a.values)
+
     intro = [
-        f"- model: {run.model}; grid: " + "; ".join(f"{a.name} = {', '.join(f'{v:g}' if not isinstance(v, str) else v for v in a.values)}"
-                                                     for a in run.axes),
+        f"- model: {run.model}; grid: " + "; ".join(axis_text(a) for a in run.axes),
         f"- {len(labels)} clips ({n_col} collision, {len(labels) - n_col} non-collision); conditions: "
         f"{', '.join(run.conditions)}; window padding {padding.before}/{padding.after} frames",
         f"- never-alerts baseline: {pct(run.baseline)} (a model that never alerts scores the share of "

@@ -13,6 +13,8 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from ..atomic import atomic_write_text
+from ..stimuli.basic import basic_stimulus
+from ..video import write_video as _write
 
 DEFAULT_CLIPS = ("dark_looming", "light_translating", "light_looming", "dark_receding")
 
@@ -20,8 +22,6 @@ DEFAULT_CLIPS = ("dark_looming", "light_translating", "light_looming", "dark_rec
 def write_video(path: str | os.PathLike, frames: Iterable[np.ndarray], fps: float = 30.0) -> Path:
     """Write grey frames (float in [0, 1] or uint8) to a lossless FFV1 AVI file, atomically
     (:func:`cdnf_ti.video.write_video`)."""
-    from ..video import write_video as _write
-
     path = Path(path)
     if path.suffix.lower() != ".avi":
         raise ValueError(f"{path}: write_video writes .avi (FFV1) files")
@@ -50,8 +50,6 @@ def make_synthetic_dataset(folder: str | os.PathLike, size: int = 96, clips: Seq
     Path
         The labels file.
     """
-    from ..stimuli.basic import basic_stimulus
-
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     head = "clip,label,window_start,window_end,contact_frame" + (",frames,description" if extra_columns else "")

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar, Iterable, Protocol, Sequence, runtime_checkable
 
 import numpy as np
+from tqdm import tqdm
 
 from ..atomic import atomic_write_text
 from ..frames import to_grey
@@ -421,8 +422,6 @@ def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bo
     seconds = [0.0] * len(models)
     bar = None
     if progress:
-        from tqdm import tqdm
-
         bar = tqdm(total=total, desc=progress if isinstance(progress, str) else models[0].name,
                    unit="frame", leave=False, disable=None)
     try:

@@ -187,6 +187,7 @@ class TaichiLGMDBackend:
 
     def __init__(self, params: Any, shape: tuple[int, int], dt: int, arch: str = "cpu"):
         ensure_taichi(arch)
+        # lazy: kernels compile for the compiler/arch that ensure_taichi picks at run time
         from ..kernels import lgmd as K
         from ..kernels.common import COLUMN_BLOCKS
 
@@ -206,6 +207,7 @@ class TaichiLGMDBackend:
 
     def _nd(self) -> Any:
         """A new (H, W) float32 ndarray, zeroed by :meth:`reset`."""
+        # lazy: taichi (or quadrants) is chosen at run time by ensure_taichi
         import taichi as ti
 
         a = ti.ndarray(ti.f32, self.shape)

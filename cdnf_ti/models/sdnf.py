@@ -158,6 +158,7 @@ class TaichiSDNFBackend:
 
     def __init__(self, params: SDNFParams, shape: tuple[int, int], arch: str = "cpu"):
         ensure_taichi(arch)
+        # lazy: taichi (or quadrants) is chosen at run time by ensure_taichi
         import taichi as ti
 
         from ..kernels import sdnf as K

@@ -1,0 +1,126 @@
+"""Command-line helpers shared by every subcommand: model options, argparse types, exit codes.
+
+A leaf module: ``cdnf_ti.run`` (the entry point) and the subcommand modules
+(``demo``, ``generate``, ``render``, ``experiments.cli``, ``bench.cli``) import it;
+it imports none of them.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+from typing import Sequence
+
+from .errors import UserError
+from .limits import MAX_DROPS
+from .models import MODELS, get_model_class
+from .taichi_runtime import check_arch
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+
+def add_model_options(ap: argparse.ArgumentParser, default_models: str = "cdnf") -> None:
+    """Options shared by every command that runs models."""
+    ap.add_argument("--model", "--models", dest="models", default=default_models,
+                    help="model name(s), comma separated (default: %(default)s); 'all' for every model")
+    ap.add_argument("--backend", default="taichi", choices=("taichi", "numpy"),
+                    help="taichi kernels (default) or the NumPy float64 reference")
+    ap.add_argument("--arch", default="cpu", choices=("cpu", "cuda", "vulkan", "gpu"),
+                    help="Taichi architecture (default: cpu)")
+
+
+def check_model_options(args: argparse.Namespace) -> None:
+    """Check the options of :func:`add_model_options` before any work: the Taichi arch must exist here.
+
+    Raises
+    ------
+    BackendUnavailableError
+        ``--arch`` names a GPU backend this machine does not have (one line, exit 2).
+    """
+    if getattr(args, "backend", "taichi") == "taichi":
+        check_arch(getattr(args, "arch", "cpu"))
+
+
+def finite_float(text: str) -> float:
+    """argparse type: a finite number (rejects inf and nan)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    value = finite_float(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
+    return value
+
+
+def drops_arg(text: str) -> int:
+    """argparse type: a rain droplet count per frame (0 .. :data:`cdnf_ti.limits.MAX_DROPS`)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if not math.isfinite(value) or value != int(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text!r}")
+    if value > MAX_DROPS:
+        raise argparse.ArgumentTypeError(f"{text} droplets per frame is too many (at most {MAX_DROPS:,})")
+    return int(value)
+
+
+def seed_arg(text: str) -> int:
+    """argparse type for seeds: a non-negative integer."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {text!r}")
+    return value
+
+
+def parse_models(spec: str) -> list[str]:
+    """``"cdnf,lgmd2"`` -> registry names; ``"all"`` -> every registered model."""
+    if spec.strip().lower() == "all":
+        return list(MODELS)
+    names = [s.strip() for s in spec.split(",") if s.strip()]
+    if not names:
+        raise UserError("no model named")
+    try:
+        return list(dict.fromkeys(get_model_class(n).name for n in names))
+    except ValueError as e:
+        raise UserError(str(e)) from None
+
+
+def unique_names(paths: Sequence[str], names: Sequence[str]) -> list[str]:
+    """Output names for inputs, made distinct: inputs sharing a name (``A/clip.mp4``, ``B/clip.mp4``)
+    are named after their folder too (``A_clip``, ``B_clip``), then numbered (``clip-2``) if need be.
+
+    Names are compared case-insensitively (case-insensitive file systems).
+    """
+    def counts(xs):
+        c: dict[str, int] = {}
+        for x in xs:
+            c[x.lower()] = c.get(x.lower(), 0) + 1
+        return c
+
+    c = counts(names)
+    out = []
+    for p, n in zip(paths, names):
+        parent = Path(str(p)).parent.name if c[n.lower()] > 1 else ""
+        out.append(f"{parent}_{n}" if parent else n)
+    seen: dict[str, int] = {}
+    final = []
+    for n in out:
+        k = n.lower()
+        seen[k] = seen.get(k, 0) + 1
+        final.append(n if seen[k] == 1 else f"{n}-{seen[k]}")
+    while len({n.lower() for n in final}) < len(final):  # a numbered name met a real one: number again
+        final = [n if i == [m.lower() for m in final].index(n.lower()) else f"{n}-{i + 1}"
+                 for i, n in enumerate(final)]
+    return final
