@@ -15,7 +15,9 @@ float64 NumPy reference of the same equations is :mod:`cdnf_ti.reference`.
 
 import functools
 
-import taichi as ti
+from ..taichi_runtime import dsl
+
+ti = dsl()  # taichi or quadrants: the same DSL
 
 from .common import (  # noqa: F401 - fill is part of this module's kernel set
     REFLECT, REPLICATE, block_span, border_index, border_weight, dog_column_sum, dog_row_pass, fill,

@@ -203,7 +203,9 @@ class _TaichiRain:
         from ..taichi_runtime import current_arch, ensure_taichi
 
         ensure_taichi(current_arch() or "cpu")
-        import taichi as ti
+        from ..taichi_runtime import dsl
+
+        ti = dsl()
 
         from ..kernels import stimuli as K
         from ..kernels.common import COLUMN_BLOCKS

@@ -32,7 +32,9 @@ class TaichiCDNFBackend:
         from ..taichi_runtime import ensure_taichi
 
         ensure_taichi(arch)
-        import taichi as ti
+        from ..taichi_runtime import dsl
+
+        ti = dsl()
 
         from ..kernels import cdnf as K
         from ..kernels.common import BORDER_CODES, COLUMN_BLOCKS
@@ -127,7 +129,9 @@ class _LaneWorkspace:
     _pool: "dict[tuple[int, int], _LaneWorkspace]" = {}
 
     def __init__(self, shape: tuple[int, int]):
-        import taichi as ti
+        from ..taichi_runtime import dsl
+
+        ti = dsl()
 
         from ..kernels.cdnf import LANES, TILE_ROWS, lane_layout, tile_blocks
 

@@ -336,7 +336,9 @@ class TaichiLGMDBackend:
         from ..taichi_runtime import ensure_taichi
 
         ensure_taichi(arch)
-        import taichi as ti
+        from ..taichi_runtime import dsl
+
+        ti = dsl()
 
         from ..kernels import lgmd as K
         from ..kernels.common import COLUMN_BLOCKS

@@ -140,7 +140,9 @@ class TaichiSDNFBackend:
         from ..taichi_runtime import ensure_taichi
 
         ensure_taichi(arch)
-        import taichi as ti
+        from ..taichi_runtime import dsl
+
+        ti = dsl()
 
         from ..kernels import sdnf as K
         from ..kernels.common import COLUMN_BLOCKS
