@@ -153,6 +153,9 @@ class Model(ABC):
         Taichi architecture (``cpu`` default; ``cuda``/``vulkan`` where available).
     fps : float
         Frame rate of the input (models with time constants need it).
+    compiler : {"quadrants", "taichi"} or None
+        Kernel compiler of the process (see :mod:`cdnf_ti.taichi_runtime`); ``None``: the
+        one running, else the fastest installed.
     """
 
     name: ClassVar[str] = ""
@@ -161,7 +164,8 @@ class Model(ABC):
     description: ClassVar[str] = ""
     BACKENDS: ClassVar[tuple[str, ...]] = ("taichi", "numpy")
 
-    def __init__(self, params: Any = None, *, backend: str = "taichi", arch: str = "cpu", fps: float = 30.0):
+    def __init__(self, params: Any = None, *, backend: str = "taichi", arch: str = "cpu", fps: float = 30.0,
+                 compiler: str | None = None):
         if backend not in self.BACKENDS:
             raise ValueError(f"{self.name}: unknown backend {backend!r}; choose one of {self.BACKENDS}")
         if not (fps > 0):
@@ -171,6 +175,11 @@ class Model(ABC):
             raise TypeError(f"{self.name}: params must be {self.params_type.__name__}")
         self.backend_name = backend
         self.arch = arch
+        if backend == "taichi" and compiler is not None:
+            from ..taichi_runtime import select_compiler
+
+            select_compiler(compiler)
+        self.compiler = compiler
         self.fps = float(fps)
         self._unconverged = 0
 
