@@ -44,6 +44,21 @@ def add_model_options(ap: argparse.ArgumentParser, default_models: str = "cdnf")
                     help="taichi kernels (default) or the NumPy float64 reference")
     ap.add_argument("--arch", default="cpu", choices=("cpu", "cuda", "vulkan", "gpu"),
                     help="Taichi architecture (default: cpu)")
+    ap.add_argument("--compiler", choices=("quadrants", "taichi"), default=None, action=_CompilerAction,
+                    help="kernel compiler (default: $CDNF_TI_COMPILER, else the fastest installed)")
+
+
+class _CompilerAction(argparse.Action):
+    """``--compiler``: names the process's kernel compiler as soon as it is parsed."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from .taichi_runtime import select_compiler
+
+        try:
+            select_compiler(values)
+        except (ValueError, BackendUnavailableError) as e:
+            parser.error(str(e))
+        setattr(namespace, self.dest, values)
 
 
 def seed_arg(text: str) -> int:

@@ -77,8 +77,9 @@ class ChebyshevSchedule:
     Linear Systems*, Alg. 12.1) is ``u_1 = u_0 + r_0 / theta`` and
     ``u_{k+1} = u_k + rho_k rho_{k-1} (u_k - u_{k-1}) + (2 rho_k / delta) r_k`` with
     ``rho_0 = 1 / sigma``, ``rho_k = 1 / (2 sigma - rho_{k-1})``; ``r_k = F(u_k) - u_k``.
-    The error falls by about ``sigma / (1 + sqrt(1 - sigma^-2))``... per step
-    asymptotically (:attr:`rate`), against ``max(|a|, |b|)`` for plain iteration.
+    The error falls asymptotically by :attr:`rate` per step, against ``max(|a|, |b|)``
+    for plain iteration (about 0.18 vs 0.5 for the contrast fields, 0.44 vs 0.79 for
+    the Summation field at the default parameters).
     """
 
     def __init__(self, a: float, b: float):

@@ -31,6 +31,8 @@ ARCHS = ("cpu", "cuda", "vulkan", "gpu")
 COMPILERS = ("quadrants", "taichi")
 #: Environment variable naming the default compiler of a process.
 COMPILER_ENV = "CDNF_TI_COMPILER"
+#: Environment variable naming the compile-cache folder (optional).
+CACHE_ENV = "CDNF_TI_CACHE_DIR"
 
 _lock = threading.Lock()
 
@@ -136,6 +138,8 @@ def ensure_taichi(arch: str = "cpu", compiler: str | None = None) -> str:
         t0 = time.perf_counter()
         ti = importlib.import_module(name)
         kw = dict(default_fp=ti.f32, default_ip=ti.i32, offline_cache=True, log_level=ti.WARN)
+        if os.environ.get(CACHE_ENV):  # compile cache folder (default: the compiler's, in ~/.cache)
+            kw["offline_cache_file_path"] = os.environ[CACHE_ENV]
         # both print "[Taichi|Quadrants] Starting on arch=..."
         with contextlib.redirect_stdout(io.StringIO()):
             try:
