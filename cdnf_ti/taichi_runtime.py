@@ -137,7 +137,7 @@ def ensure_taichi(arch: str = "cpu", compiler: str | None = None) -> str:
         name = default_compiler()
         t0 = time.perf_counter()
         ti = importlib.import_module(name)
-        kw = dict(default_fp=ti.f32, default_ip=ti.i32, offline_cache=True, log_level=ti.WARN)
+        kw = dict(default_fp=ti.f32, default_ip=ti.i32, offline_cache=True, log_level=ti.ERROR)
         if os.environ.get(CACHE_ENV):  # compile cache folder (default: the compiler's, in ~/.cache)
             kw["offline_cache_file_path"] = os.environ[CACHE_ENV]
         # both print "[Taichi|Quadrants] Starting on arch=..."
