@@ -44,7 +44,7 @@ def add_model_options(ap: argparse.ArgumentParser, default_models: str = "cdnf")
                     help="taichi kernels (default) or the NumPy float64 reference")
     ap.add_argument("--arch", default="cpu", choices=("cpu", "cuda", "vulkan", "gpu"),
                     help="Taichi architecture (default: cpu)")
-    ap.add_argument("--compiler", choices=("quadrants", "taichi"), default=None, action=_CompilerAction,
+    ap.add_argument("--compiler", choices=("taichi", "quadrants"), default=None, action=_CompilerAction,
                     help="kernel compiler (default: $CDNF_TI_COMPILER, else the fastest installed)")
 
 

@@ -2,10 +2,12 @@
 
 cdnf_ti's kernels are written in the Taichi DSL and compile under either
 
-* ``quadrants`` (``import quadrants as qd``; LLVM 22, emits AVX-512 on current x86 CPUs,
-  wheels for Python 3.10-3.13+), the default where it is installed, or
-* ``taichi`` 1.7 (upstream; LLVM 15, 128-bit vectors on CPUs it does not know; wheels up to
-  Python 3.12).
+* ``taichi`` 1.7 (upstream; LLVM 15; wheels up to Python 3.12), the default where it is
+  installed: with the lane-vectorised layout of :mod:`cdnf_ti.kernels.cdnf` it measured
+  about 3x less CPU time per frame than quadrants on the project's Zen 5 machines
+  (``docs/PERFORMANCE.md``), or
+* ``quadrants`` (``import quadrants as qd``; the maintained fork, LLVM 22, wheels for
+  Python 3.10-3.13+), the default where taichi has no wheel (Python 3.13).
 
 Both expose the same DSL (``ti.kernel``, ``ti.func``, ``ti.field``...). Kernel modules get the
 DSL module of the process's compiler from :func:`dsl`, so one statement of each kernel serves
@@ -28,7 +30,7 @@ from types import ModuleType
 
 ARCHS = ("cpu", "cuda", "vulkan", "gpu")
 #: Supported kernel compilers, fastest first (the default is the first one installed).
-COMPILERS = ("quadrants", "taichi")
+COMPILERS = ("taichi", "quadrants")
 #: Environment variable naming the default compiler of a process.
 COMPILER_ENV = "CDNF_TI_COMPILER"
 #: Environment variable naming the compile-cache folder (optional).

@@ -25,8 +25,8 @@ def test_the_process_runs_the_compiler_it_was_asked_for():
     assert current_compiler() == want
 
 
-def test_the_default_is_the_first_installed_of_quadrants_then_taichi():
-    assert COMPILERS == ("quadrants", "taichi")
+def test_the_default_is_the_first_installed_of_taichi_then_quadrants():
+    assert COMPILERS == ("taichi", "quadrants")
     assert installed_compilers() and set(installed_compilers()) <= set(COMPILERS)
 
 
