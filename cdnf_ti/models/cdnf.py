@@ -302,6 +302,20 @@ class LaneTaichiCDNFBackend:
         self.K.lanes_fill(ws.P, 0.0)
         ws.all_active()
 
+    def warm_up(self, steps: int) -> None:
+        """Compile the multi-step kernels for both buffer parities now, not mid-run.
+
+        The kernels take the ping-pong buffers as template arguments, so each order is a
+        separate compilation. Updates with ``lam = mom = 0`` leave every value as it is.
+        """
+        for n in sorted({1, steps}):
+            for _ in range(2):
+                self.contrast_iterate_many([(0.0, 0.0)] * n)
+                self.summation_input()  # also takes the contrast buffers by parity
+                self.summation_iterate_many([(0.0, 0.0)] * n)
+                self.mean_activation()
+        self._acquire().all_active()
+
     def _done(self, res: list[tuple[float, ...]]) -> list[tuple[float, ...]]:
         """The updates a multi-step launch performed: up to the first with every residual <= tol."""
         for j, r in enumerate(res):
@@ -438,6 +452,8 @@ class CDNF(Model):
         # The resting state for this frame size and border: the solution with no input.
         be.clear_input()
         self._solve(be)
+        if hasattr(be, "warm_up"):
+            be.warm_up(p.steps_per_launch)
         be.save_rest()
         self._be = be
 
