@@ -1,11 +1,13 @@
-"""``python -m cdnf_ti.run bench``: throughput table of every model and the C-DNF peers.
+"""``python -m cdnf_ti.run bench``: throughput table of every model, both compilers and the C-DNF peers.
 
 For each input (basic stimulus and real footage, at 426x240 and 600x600) it runs
-every registered model (Taichi backend) and, for C-DNF, the peer
-implementations of :mod:`cdnf_ti.bench.peers` in the same process, and prints:
-model, input, resolution, frames/s, the ratio to each peer, and the largest
-``|output - output_ref|`` against the float64 NumPy reference of the same model
-on the same frames.
+every registered model (Taichi-DSL kernels) under each installed kernel compiler
+(``quadrants``, ``taichi``; a process runs one, so the others run in a child
+process of the same command), C-DNF also with the paper's plain scheme, and the
+peer implementations of :mod:`cdnf_ti.bench.peers` (plain scheme), and prints:
+model, compiler, scheme, input, resolution, frames/s, the ratio to each peer,
+ms per field-iteration, and the largest ``|output - output_ref|`` against the
+float64 NumPy reference of the same model on the same frames.
 
 Frames are decoded before timing; frames/s counts the model's ``step`` only
 (frame 0, which needs no solve, is excluded). Each measurement is repeated and
@@ -37,6 +39,9 @@ class BenchRow:
     ratios: dict[str, float] = field(default_factory=dict)
     max_diff: float = float("nan")
     iterations: str = ""
+    compiler: str = ""
+    scheme: str = ""
+    ms_per_iteration: float = float("nan")  # ms per field-iteration (C-DNF: ON, OFF, Summation counted apart)
 
 
 def time_model(make: Callable[[], object], frames: Sequence[np.ndarray], repeats: int = 3) -> tuple[float, np.ndarray, dict]:
@@ -108,53 +113,132 @@ def bench_inputs(n_frames: int, clip: str | None = None,
     return out
 
 
-def run_bench(models: Sequence[str], n_frames: int = 30, repeats: int = 3, clip: str | None = None,
-              reference: bool = True, progress: bool = True,
-              resolutions: Sequence[tuple[int, int]] = RESOLUTIONS) -> list[BenchRow]:
-    """Measure every model (and the C-DNF peers) on every input; see the module docstring."""
-    from tqdm import tqdm
+def _iteration_stats(row: BenchRow, diag: dict) -> None:
+    if "iterations_on" in diag:
+        its = [float(np.mean(diag[k])) for k in ("iterations_on", "iterations_off", "iterations_sum")]
+        row.iterations = "/".join(f"{x:.1f}" for x in its)
+        if sum(its) > 0 and row.fps > 0:
+            row.ms_per_iteration = 1000.0 / row.fps / sum(its)
 
+
+def model_rows(models: Sequence[str], inputs, repeats: int, reference: bool, bar=None) -> list[BenchRow]:
+    """Rows of every model under this process's compiler (C-DNF with both schemes)."""
     from ..models import create_model
-    from .peers import PeerCDNF, available_peers
+    from ..params import CDNFParams
+    from ..taichi_runtime import current_compiler, ensure_taichi
 
-    peers = list(available_peers())
-    inputs = bench_inputs(n_frames, clip, resolutions)
-    rows: list[BenchRow] = []
-    bar = tqdm(total=len(inputs) * (len(models) + (len(peers) if "cdnf" in models else 0)),
-               desc="bench", unit="run", leave=False, disable=None if progress else True)
+    ensure_taichi("cpu")
+    comp = current_compiler() or ""
+    rows = []
     for in_label, res, frames in inputs:
         for name in models:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                fps, out, diag = time_model(lambda: create_model(name, backend="taichi"), frames, repeats)
-            bar.update(1)
+            variants = [("chebyshev", CDNFParams()), ("plain", CDNFParams(scheme="plain"))] if name == "cdnf" \
+                else [("", None)]
             ref = reference_outputs(name, frames) if reference else None
-            row = BenchRow(name, in_label, res, fps,
-                           max_diff=float(np.abs(out - ref).max()) if ref is not None else float("nan"))
-            if "iterations_on" in diag:
-                row.iterations = (f"{np.mean(diag['iterations_on']):.0f}/{np.mean(diag['iterations_off']):.0f}/"
-                                  f"{np.mean(diag['iterations_sum']):.0f}")
-            rows.append(row)
-            if name == "cdnf":
-                for peer in peers:
-                    pfps, pout, _ = time_model(lambda: PeerCDNF(peer), frames, repeats)
+            for scheme, params in variants:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    fps, out, diag = time_model(lambda: create_model(name, params, backend="taichi"), frames, repeats)
+                if bar is not None:
                     bar.update(1)
-                    row.ratios[peer] = fps / pfps
-                    rows.append(BenchRow(f"cdnf[{peer}]", in_label, res, pfps,
-                                         max_diff=float(np.abs(pout - ref).max()) if ref is not None else float("nan")))
-    bar.close()
+                row = BenchRow(name, in_label, res, fps, compiler=comp, scheme=scheme,
+                               max_diff=float(np.abs(out - ref).max()) if ref is not None else float("nan"))
+                _iteration_stats(row, diag)
+                rows.append(row)
     return rows
+
+
+def _child_rows(compiler: str, models: Sequence[str], n_frames: int, repeats: int, clip: str | None,
+                reference: bool, resolutions) -> list[BenchRow]:
+    """:func:`model_rows` under another compiler, in a child process (one compiler per process)."""
+    import json
+    import os
+    import subprocess
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        out = os.path.join(tmp, "rows.json")
+        cmd = [sys.executable, "-m", "cdnf_ti.run", "bench", "--compiler", compiler, "--models-only", out,
+               "--model", ",".join(models), "--frames", str(n_frames), "--repeats", str(repeats),
+               "--sizes", ",".join(f"{w}x{h}" for h, w in resolutions)]
+        if clip is not None:
+            cmd += ["--clip", str(clip)]
+        if not reference:
+            cmd.append("--no-reference")
+        env = dict(os.environ, CDNF_TI_COMPILER=compiler)
+        proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
+        if proc.returncode != 0 or not os.path.exists(out):
+            msg = (proc.stderr.strip().splitlines() or ["no output"])[-1]
+            warnings.warn(f"bench under {compiler} failed: {msg}", RuntimeWarning, stacklevel=2)
+            return []
+        with open(out) as f:
+            return [BenchRow(**r) for r in json.load(f)]
+
+
+def run_bench(models: Sequence[str], n_frames: int = 30, repeats: int = 3, clip: str | None = None,
+              reference: bool = True, progress: bool = True,
+              resolutions: Sequence[tuple[int, int]] = RESOLUTIONS,
+              compilers: Sequence[str] | None = None) -> list[BenchRow]:
+    """Measure every model under every compiler, and the C-DNF peers; see the module docstring.
+
+    ``compilers`` defaults to every installed one; this process's compiler runs here, the
+    others in child processes. Ratios ``x peer`` divide a row's frames/s by the peer's
+    (plain scheme) on the same input, all from this one run.
+    """
+    from tqdm import tqdm
+
+    from ..taichi_runtime import current_compiler, ensure_taichi, installed_compilers
+    from .peers import PeerCDNF, available_peers
+
+    ensure_taichi("cpu")
+    here = current_compiler()
+    compilers = list(compilers) if compilers is not None else list(installed_compilers())
+    peers = list(available_peers())
+    inputs = bench_inputs(n_frames, clip, resolutions)
+    n_runs = sum(2 if m == "cdnf" else 1 for m in models)
+    bar = tqdm(total=len(inputs) * (n_runs + (len(peers) if "cdnf" in models else 0)),
+               desc="bench", unit="run", leave=False, disable=None if progress else True)
+    rows: list[BenchRow] = []
+    if here in compilers:
+        rows += model_rows(models, inputs, repeats, reference, bar)
+    for comp in compilers:
+        if comp != here:
+            bar.set_description(f"bench ({comp}, child process)")
+            rows += _child_rows(comp, models, n_frames, repeats, clip, reference, resolutions)
+    peer_rows = []
+    if "cdnf" in models:
+        for in_label, res, frames in inputs:
+            ref = reference_outputs("cdnf", frames) if reference else None
+            for peer in peers:
+                pfps, pout, pdiag = time_model(lambda: PeerCDNF(peer), frames, repeats)
+                bar.update(1)
+                prow = BenchRow(f"cdnf[{peer}]", in_label, res, pfps, scheme="plain",
+                                max_diff=float(np.abs(pout - ref).max()) if ref is not None else float("nan"))
+                _iteration_stats(prow, pdiag)
+                peer_rows.append(prow)
+    bar.close()
+    for row in rows:
+        if row.model == "cdnf":
+            for prow in peer_rows:
+                if (prow.input, prow.resolution) == (row.input, row.resolution):
+                    row.ratios[prow.model[5:-1]] = row.fps / prow.fps
+    order = {(lab, res): k for k, (lab, res, _) in enumerate(inputs)}
+    allrows = rows + peer_rows
+    allrows.sort(key=lambda r: (order.get((r.input, r.resolution), 0), r.model.startswith("cdnf[") ,
+                                r.model != "cdnf", r.model, r.compiler, r.scheme))
+    return allrows
 
 
 def format_table(rows: Sequence[BenchRow]) -> str:
     """Plain-text table (also valid Markdown)."""
     peers = sorted({p for r in rows for p in r.ratios})
-    head = ["model", "input", "resolution", "frames/s", *[f"x {p}" for p in peers], "max |dI| vs f64 ref",
-            "iters on/off/sum"]
+    head = ["model", "compiler", "scheme", "input", "resolution", "frames/s", *[f"x {p}" for p in peers],
+            "ms/field-iter", "max |dI| vs f64 ref", "iters on/off/sum"]
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
     for r in rows:
-        cells = [r.model, r.input, r.resolution, f"{r.fps:.1f}"]
+        cells = [r.model, r.compiler, r.scheme, r.input, r.resolution, f"{r.fps:.1f}"]
         cells += [f"{r.ratios[p]:.2f}" if p in r.ratios else "" for p in peers]
+        cells += ["" if np.isnan(r.ms_per_iteration) else f"{r.ms_per_iteration:.3f}"]
         cells += ["n/a" if np.isnan(r.max_diff) else f"{r.max_diff:.1e}", r.iterations]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -177,6 +261,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--sizes", default=None,
                     help="comma-separated WxH list (default: 426x240,600x600)")
     ap.add_argument("--no-reference", action="store_true", help="skip the float64 reference comparison")
+    ap.add_argument("--compiler", default=None,
+                    help="comma-separated kernel compilers to measure (default: every installed one)")
+    ap.add_argument("--models-only", default=None, metavar="JSON", help=argparse.SUPPRESS)  # child process mode
+    ap.add_argument("--startup", action="store_true",
+                    help="also measure start-up (process start to the first frame) with a cold and a warm cache")
     args = ap.parse_args(argv)
     n = args.frames if args.frames is not None else (6 if args.quick else 30)
     if n < 3:
@@ -196,11 +285,67 @@ def main(argv: Sequence[str] | None = None) -> int:
         from ..frames import open_source
 
         open_source(args.clip)  # raises InputError with a one-line message
+    from ..taichi_runtime import COMPILERS, installed_compilers, select_compiler
+
+    compilers = list(installed_compilers())
+    if args.compiler:
+        compilers = [c.strip().lower() for c in args.compiler.split(",") if c.strip()]
+        for c in compilers:
+            if c not in COMPILERS:
+                raise ValueError(f"--compiler: unknown compiler {c!r}; choose from {', '.join(COMPILERS)}")
+        if args.models_only or len(compilers) == 1:
+            select_compiler(compilers[0])
     ensure_taichi("cpu")
     models = parse_models(args.models or ("cdnf" if args.quick else "all"))
-    rows = run_bench(models, n, repeats, args.clip, reference=not args.no_reference, resolutions=resolutions)
+    if args.models_only:
+        import json
+        from dataclasses import asdict
+
+        rows = model_rows(models, bench_inputs(n, args.clip, resolutions), repeats, not args.no_reference)
+        with open(args.models_only, "w") as f:
+            json.dump([asdict(r) for r in rows], f)
+        return 0
+    rows = run_bench(models, n, repeats, args.clip, reference=not args.no_reference, resolutions=resolutions,
+                     compilers=compilers)
     print(format_table(rows))
+    if args.startup:
+        print()
+        print(format_startup(measure_startup(compilers)))
     return 0
+
+
+def measure_startup(compilers: Sequence[str], size: tuple[int, int] = (240, 426)) -> list[tuple[str, str, float]]:
+    """Seconds from a fresh ``python`` to C-DNF's first solved frame, per compiler, cold and warm cache.
+
+    "cold" runs with an empty compile cache (a fresh ``$CDNF_TI_CACHE_DIR`` folder),
+    "warm" runs again with the cache that run filled.
+    """
+    import os
+    import subprocess
+    import tempfile
+
+    code = ("import time; t0 = time.perf_counter(); import numpy as np; from cdnf_ti import CDNF; "
+            f"m = CDNF(); f = np.zeros({size}, np.float32); m.step(f); m.step(f + 0.5); "
+            "print(time.perf_counter() - t0)")
+    out = []
+    for comp in compilers:
+        with tempfile.TemporaryDirectory() as cache:
+            env = dict(os.environ, CDNF_TI_COMPILER=comp, CDNF_TI_CACHE_DIR=cache)
+            for label in ("cold", "warm"):
+                t0 = time.perf_counter()
+                proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+                wall = time.perf_counter() - t0
+                if proc.returncode != 0:
+                    out.append((comp, label, float("nan")))
+                else:
+                    out.append((comp, label, wall))
+    return out
+
+
+def format_startup(rows: Sequence[tuple[str, str, float]]) -> str:
+    lines = ["| compiler | cache | start-up to first frame (s) |", "|---|---|---|"]
+    lines += [f"| {c} | {k} | {t:.2f} |" for c, k, t in rows]
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

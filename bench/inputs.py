@@ -1,12 +1,14 @@
 """Benchmark inputs: basic stimuli, the shared dashcam clips, or a generated stand-in video."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 
 #: The shared dashcam clips (426/432 x 240), next to the repository when present.
-SHARED_REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
+SHARED_REAL = (Path(os.environ.get("CDNF_TI_SHARED", Path(__file__).resolve().parents[1].parent / "shared"))
+               / "data" / "real")
 
 
 def shared_clip(name: str = "serial_vehicle_collision") -> Path | None:

@@ -221,6 +221,8 @@ class PeerCDNF(CDNF):
         peers = available_peers()
         if peer not in peers:
             raise ValueError(f"peer {peer!r} is not available here; available: {', '.join(peers)}")
+        # the paper's plain scheme: the peers implement the relaxed update only
+        params = (params or CDNFParams()).replace(scheme="plain")
         super().__init__(params, backend="numpy", fps=fps)
         self.peer = peer
         self._peer_cls = peers[peer]

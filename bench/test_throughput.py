@@ -9,6 +9,9 @@ table use ``python -m cdnf_ti.run bench``.
 Inputs: a basic stimulus (dark looming) and real footage (the shared dashcam
 clip ``serial_vehicle_collision`` when ``../shared`` is present, else a
 generated stand-in video), each at 426x240 and 600x600.
+
+One process runs one kernel compiler: ``CDNF_TI_COMPILER=quadrants pytest bench/
+--benchmark-only`` measures the other one (``extra_info["compiler"]`` says which).
 """
 import warnings
 
@@ -17,6 +20,8 @@ import pytest
 from cdnf_ti.bench.cli import bench_inputs
 from cdnf_ti.bench.peers import PeerCDNF, available_peers
 from cdnf_ti.models import MODELS, create_model
+from cdnf_ti.params import CDNFParams
+from cdnf_ti.taichi_runtime import current_compiler, ensure_taichi
 
 N_FRAMES = 12
 INPUTS = {f"{label.split(':')[0]}-{res}": (label, frames) for label, res, frames in bench_inputs(N_FRAMES)}
@@ -35,6 +40,8 @@ def _bench(benchmark, model, frames):
         _stepper(model, frames[:3])  # compile
         benchmark.pedantic(_stepper, args=(model, frames), rounds=3, iterations=1, warmup_rounds=0)
     n = len(frames)
+    ensure_taichi("cpu")
+    benchmark.extra_info["compiler"] = current_compiler()
     benchmark.extra_info["frames"] = n
     benchmark.extra_info["frames_per_s"] = n / benchmark.stats.stats.median
 
@@ -55,3 +62,12 @@ def test_cdnf_peer_throughput(benchmark, peer, input_key):
     benchmark.group = input_key
     benchmark.extra_info["input"] = label
     _bench(benchmark, PeerCDNF(peer), frames)
+
+
+@pytest.mark.parametrize("input_key", list(INPUTS))
+def test_cdnf_plain_scheme_throughput(benchmark, input_key):
+    # the paper's scheme, the same one the peers run: compares the engines iteration for iteration
+    label, frames = INPUTS[input_key]
+    benchmark.group = input_key
+    benchmark.extra_info["input"] = label
+    _bench(benchmark, create_model("cdnf", CDNFParams(scheme="plain"), backend="taichi"), frames)

@@ -14,7 +14,7 @@ from typing import Sequence
 from .errors import UserError
 from .limits import MAX_DROPS
 from .models import MODELS, get_model_class
-from .taichi_runtime import check_arch
+from .taichi_runtime import COMPILERS, check_arch, select_compiler
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
@@ -27,6 +27,16 @@ def add_model_options(ap: argparse.ArgumentParser, default_models: str = "cdnf")
                     help="taichi kernels (default) or the NumPy float64 reference")
     ap.add_argument("--arch", default="cpu", choices=("cpu", "cuda", "vulkan", "gpu"),
                     help="Taichi architecture (default: cpu)")
+    ap.add_argument("--compiler", choices=COMPILERS, default=None, action=_CompilerAction,
+                    help="kernel compiler (default: $CDNF_TI_COMPILER, else the fastest installed)")
+
+
+class _CompilerAction(argparse.Action):
+    """``--compiler``: names the process's kernel compiler (and its workers') as soon as it is parsed."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        select_compiler(values)  # UserError (one line, exit 2) when it is not installed
+        setattr(namespace, self.dest, values)
 
 
 def check_model_options(args: argparse.Namespace) -> None:

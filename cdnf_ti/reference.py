@@ -99,6 +99,7 @@ class NumpyCDNFBackend(RestingFields):
         self.u_off = np.full(self.shape, u0)
         self.v = np.full(self.shape, v0)
         self.S = np.zeros(self.shape)
+        self.prev_on = self.prev_off = self.prev_v = None  # previous iterates (Chebyshev momentum)
 
     # -- state -----------------------------------------------------------
     def load(self, grey: np.ndarray, first: bool) -> None:
@@ -116,8 +117,11 @@ class NumpyCDNFBackend(RestingFields):
         self.P = np.zeros(self.shape)
 
     # -- field updates ---------------------------------------------------
-    def contrast_iterate(self, lam: float) -> tuple[float, float]:
-        """One relaxed update of the ON and OFF fields; returns their residuals."""
+    def contrast_iterate(self, lam: float, mom: float = 0.0) -> tuple[float, float]:
+        """One update ``u + mom (u - u_prev) + lam (F(u) - u)`` of the ON and OFF fields.
+
+        Returns the residuals ``max |F(u) - u|`` at the fields before the update.
+        """
         p, b = self.params, self.params.border
         p_on = np.maximum(self.P, 0.0)
         p_off = -np.minimum(self.P, 0.0)
@@ -125,9 +129,15 @@ class NumpyCDNFBackend(RestingFields):
         f_off = p_off - p.h + vartheta(correlate(self.u_off, self.w_c, b))
         d_on = f_on - self.u_on
         d_off = f_off - self.u_off
-        self.u_on = self.u_on + lam * d_on
-        self.u_off = self.u_off + lam * d_off
+        self.u_on, self.prev_on = self._step(self.u_on, self.prev_on, d_on, lam, mom), self.u_on
+        self.u_off, self.prev_off = self._step(self.u_off, self.prev_off, d_off, lam, mom), self.u_off
         return float(np.abs(d_on).max()), float(np.abs(d_off).max())
+
+    @staticmethod
+    def _step(u: np.ndarray, prev: np.ndarray | None, d: np.ndarray, lam: float, mom: float) -> np.ndarray:
+        if mom == 0.0 or prev is None:
+            return u + lam * d
+        return u + mom * (u - prev) + lam * d
 
     def summation_input(self) -> None:
         """``S = alpha_on theta([u_on]+) + alpha_off theta([u_off]+)``."""
@@ -136,12 +146,12 @@ class NumpyCDNFBackend(RestingFields):
             np.maximum(self.u_off, 0.0)
         )
 
-    def summation_iterate(self, lam: float) -> tuple[float]:
-        """One relaxed update of the Summation field; returns its residual."""
+    def summation_iterate(self, lam: float, mom: float = 0.0) -> tuple[float]:
+        """One update of the Summation field (as :meth:`contrast_iterate`); returns its residual."""
         p = self.params
         f = self.S - p.h + vartheta(correlate(self.v, self.w_s, p.border))
         d = f - self.v
-        self.v = self.v + lam * d
+        self.v, self.prev_v = self._step(self.v, self.prev_v, d, lam, mom), self.v
         return (float(np.abs(d).max()),)
 
     def mean_activation(self) -> float:

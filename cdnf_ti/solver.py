@@ -1,18 +1,40 @@
 """Per-frame fixed-point orchestration shared by every C-DNF backend.
 
-A backend supplies ``iterate(lam) -> residuals``: one relaxed update
-``u <- u + lam (F(u) - u)`` of one or more coupled fields, returning the
-residual ``max |F(u) - u|`` of each field *before* the update. The controller
-here decides when to stop, and damps (halves ``lam``) when the residual stops
-falling, so both backends follow the same schedule and an unconverged field is
-always reported, never returned silently.
+A backend supplies ``iterate(lam, mom=0.0) -> residuals``: one update
+
+    u_next = u + mom (u - u_prev) + lam (F(u) - u)
+
+of one or more coupled fields (``u_prev`` is the iterate before ``u``), returning
+the residual ``max |F(u) - u|`` of each field *at u*, i.e. the plain map's
+residual that MODEL.md binds. Optionally ``iterate_many([(lam, mom), ...])``
+runs several such updates in one kernel launch and stops early once every
+residual is at most ``tol``.
+
+Two schemes drive it:
+
+* ``plain`` (the paper's): ``mom = 0``, ``lam`` = the damping, halved when the
+  residual stops falling;
+* ``chebyshev`` (default): Chebyshev semi-iteration for a map whose Jacobian has
+  its spectrum in ``[a, b]`` (``b < 1``), see :class:`ChebyshevSchedule`. It needs
+  no extra buffer (``u_prev`` is the ping-pong buffer being overwritten) and no
+  extra reduction. Safeguard: when the residual grows above ``restart_growth``
+  times the best seen, the recurrence restarts from the current iterate; after
+  ``max_restarts`` restarts the solve falls back to the plain, damped controller,
+  with a fresh ``max_iter`` budget, so no frame ends unconverged where plain
+  iteration converges.
+
+Both schemes stop on the same rule: every field's residual ``<= tol``.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
+
+Coef = tuple[float, float]  # (lam, mom)
+SCHEMES = ("chebyshev", "plain")
 
 
 @dataclass
@@ -22,56 +44,187 @@ class SolveReport:
     Attributes
     ----------
     iterations : tuple of int
-        Per field, the number of updates until its residual fell below ``tol``
-        (``max_iter`` when it never did).
+        Per field, the number of updates until its residual fell to ``tol`` or below
+        (the total number of updates when it never did).
     residuals : tuple of float
         Per field, the last residual ``max |F(u) - u|`` measured.
     converged : bool
         Every field reached ``tol``.
     damping : float
-        The relaxation ``lambda`` in force at the end.
+        The plain scheme's relaxation ``lambda`` in force at the end (1.0 when the
+        Chebyshev scheme finished the solve).
+    restarts : int
+        Chebyshev restarts, plus one if the solve fell back to plain iteration.
+    scheme : str
+        The scheme that finished the solve (``"chebyshev"`` or ``"plain"``).
     """
 
     iterations: tuple[int, ...]
     residuals: tuple[float, ...]
     converged: bool
     damping: float
+    restarts: int = 0
+    scheme: str = "plain"
+
+
+class ChebyshevSchedule:
+    """Coefficients ``(lam_k, mom_k)`` of Chebyshev semi-iteration for ``u = F(u)``.
+
+    With the Jacobian of ``F`` spectrally in ``[a, b]`` (``b < 1``), the linearised
+    problem ``(I - J) e = r`` has its spectrum in ``[alpha, beta] = [1 - b, 1 - a]``;
+    with ``theta = (beta + alpha) / 2``, ``delta = (beta - alpha) / 2`` and
+    ``sigma = theta / delta`` the recurrence (Saad, *Iterative Methods for Sparse
+    Linear Systems*, Alg. 12.1) is ``u_1 = u_0 + r_0 / theta`` and
+    ``u_{k+1} = u_k + rho_k rho_{k-1} (u_k - u_{k-1}) + (2 rho_k / delta) r_k`` with
+    ``rho_0 = 1 / sigma``, ``rho_k = 1 / (2 sigma - rho_{k-1})``; ``r_k = F(u_k) - u_k``.
+    The error falls asymptotically by :attr:`rate` per step, against ``max(|a|, |b|)``
+    for plain iteration (about 0.18 vs 0.5 for the contrast fields, 0.44 vs 0.79 for
+    the Summation field at the default parameters).
+    """
+
+    def __init__(self, a: float, b: float):
+        if not (a <= b < 1.0):
+            raise ValueError(f"Chebyshev bounds must satisfy a <= b < 1, got [{a}, {b}]")
+        alpha, beta = 1.0 - b, 1.0 - a
+        self.theta = 0.5 * (beta + alpha)
+        self.delta = 0.5 * (beta - alpha)
+        self.sigma = self.theta / self.delta if self.delta > 1e-12 else math.inf
+        self.k = 0
+        self._rho = 0.0
+
+    @property
+    def rate(self) -> float:
+        """Asymptotic error reduction per step (0 when ``a == b``)."""
+        if math.isinf(self.sigma):
+            return 0.0
+        s = 1.0 / self.sigma
+        return s / (1.0 + math.sqrt(1.0 - s * s))
+
+    def restart(self) -> None:
+        """Start the recurrence again from the current iterate (next step has no momentum)."""
+        self.k = 0
+
+    def next(self) -> Coef:
+        """The coefficients of the next step."""
+        if self.k == 0 or math.isinf(self.sigma):
+            self.k = 1
+            self._rho = 0.0 if math.isinf(self.sigma) else 1.0 / self.sigma
+            return 1.0 / self.theta, 0.0
+        rho = 1.0 / (2.0 * self.sigma - self._rho)
+        coef = (2.0 * rho / self.delta, rho * self._rho)
+        self._rho = rho
+        self.k += 1
+        return coef
+
+    def take(self, n: int) -> list[Coef]:
+        return [self.next() for _ in range(n)]
+
+
+def _many(iterate: Callable[..., Sequence[float]], tol: float) -> Callable[[Sequence[Coef]], list[Sequence[float]]]:
+    """``iterate_many`` built from a one-step ``iterate(lam, mom)``: stops once every residual <= tol."""
+
+    def run(coefs: Sequence[Coef]) -> list[Sequence[float]]:
+        out = []
+        for lam, mom in coefs:
+            r = iterate(lam, mom)
+            out.append(r)
+            if max(r) <= tol:
+                break
+        return out
+
+    return run
 
 
 def solve_fixed_point(
-    iterate: Callable[[float], Sequence[float]],
+    iterate: Callable[..., Sequence[float]],
     n_fields: int,
     tol: float,
     max_iter: int,
     damping: float = 1.0,
     min_damping: float = 1.0 / 64.0,
     stall_patience: int = 4,
+    *,
+    bounds: tuple[float, float] | None = None,
+    steps: int = 1,
+    iterate_many: Callable[[Sequence[Coef]], list[Sequence[float]]] | None = None,
+    restart_growth: float = 2.0,
+    max_restarts: int = 2,
 ) -> SolveReport:
-    """Iterate ``iterate(lam)`` until every residual is below ``tol``.
+    """Iterate until every field's residual is at most ``tol``.
 
     Parameters
     ----------
     iterate : callable
-        ``iterate(lam)`` performs one relaxed update of all fields and returns
-        their residuals (length ``n_fields``).
+        ``iterate(lam)`` (plain only) or ``iterate(lam, mom)``: one update of all
+        fields, returning their residuals before the update (length ``n_fields``).
     n_fields : int
         Number of fields updated together (2 for ON/OFF, 1 for Summation).
     tol : float
-        Convergence tolerance on each residual.
+        Convergence tolerance on each residual (the plain map's ``max |F(u) - u|``).
     max_iter : int
-        Maximum number of updates.
-    damping : float
-        Initial relaxation ``lambda``.
-    min_damping : float
-        Lower bound for ``lambda``.
-    stall_patience : int
-        After this many consecutive updates whose largest residual did not fall
-        below the best seen so far, ``lambda`` is halved.
+        Maximum number of updates per scheme (the plain fallback gets its own budget).
+    damping, min_damping, stall_patience : float, float, int
+        The plain scheme's initial relaxation, its floor, and the number of updates
+        without a new best residual after which it is halved.
+    bounds : (a, b) or None
+        Spectral bounds of the map's Jacobian: Chebyshev semi-iteration with them;
+        ``None``: the plain scheme.
+    steps : int
+        Chebyshev updates per call of ``iterate_many`` (several per kernel launch).
+    iterate_many : callable, optional
+        ``iterate_many(coefs)`` runs the updates ``coefs`` (list of ``(lam, mom)``) and
+        returns the residuals of those it ran, stopping after the first whose every
+        residual is ``<= tol``. Built from ``iterate`` when omitted.
+    restart_growth : float
+        Restart the Chebyshev recurrence when the worst residual exceeds this factor
+        times the best one seen.
+    max_restarts : int
+        Restarts allowed before falling back to plain iteration.
 
     Returns
     -------
     SolveReport
     """
+    if bounds is None:
+        return _solve_plain(iterate, n_fields, tol, max_iter, damping, min_damping, stall_patience)
+    many = iterate_many if iterate_many is not None else _many(iterate, tol)
+    sched = ChebyshevSchedule(*bounds)
+    first_ok = [0] * n_fields
+    best = math.inf
+    restarts = 0
+    res: Sequence[float] = [math.inf] * n_fields
+    k = 0
+    while k < max_iter:
+        coefs = sched.take(min(max(1, steps), max_iter - k))
+        results = many(coefs)
+        grew = False
+        for res in results:
+            k += 1
+            for f in range(n_fields):
+                if first_ok[f] == 0 and res[f] <= tol:
+                    first_ok[f] = k
+            worst = max(res)
+            if worst <= tol:
+                return SolveReport(tuple(first_ok), tuple(float(r) for r in res), True, 1.0, restarts, "chebyshev")
+            if not math.isfinite(worst) or worst > restart_growth * best:
+                grew = True
+            best = min(best, worst)
+        if len(results) < len(coefs):  # the backend stopped early: it must have converged
+            break
+        if grew:
+            if restarts >= max_restarts or not math.isfinite(max(res)):
+                break
+            restarts += 1
+            sched.restart()
+            best = max(res)
+    # Safeguard: finish with the plain, damped controller from the current iterate.
+    rep = _solve_plain(iterate, n_fields, tol, max_iter, damping, min_damping, stall_patience)
+    iters = tuple(first_ok[f] if first_ok[f] else k + rep.iterations[f] for f in range(n_fields))
+    return SolveReport(iters, rep.residuals, rep.converged, rep.damping, restarts + 1, "plain")
+
+
+def _solve_plain(iterate, n_fields, tol, max_iter, damping, min_damping, stall_patience) -> SolveReport:
+    """The paper's scheme: ``u <- u + lam (F(u) - u)``, ``lam`` halved when the residual stalls."""
     lam = float(damping)
     first_ok = [0] * n_fields
     best = np.inf
@@ -80,10 +233,10 @@ def solve_fixed_point(
     for k in range(1, max_iter + 1):
         res = iterate(lam)
         for f in range(n_fields):
-            if first_ok[f] == 0 and res[f] < tol:
+            if first_ok[f] == 0 and res[f] <= tol:
                 first_ok[f] = k
         worst = max(res)
-        if worst < tol:
+        if worst <= tol:
             return SolveReport(tuple(first_ok), tuple(float(r) for r in res), True, lam)
         if not np.isfinite(worst):
             break
@@ -98,3 +251,10 @@ def solve_fixed_point(
                 best = worst
     iters = tuple(first_ok[f] if first_ok[f] else max_iter for f in range(n_fields))
     return SolveReport(iters, tuple(float(r) for r in res), False, lam)
+
+
+def iter_schedule(bounds: tuple[float, float]) -> Iterator[Coef]:
+    """Endless Chebyshev coefficients for ``bounds`` (for backends and tests)."""
+    s = ChebyshevSchedule(*bounds)
+    while True:
+        yield s.next()

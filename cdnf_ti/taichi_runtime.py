@@ -1,46 +1,136 @@
-"""One Taichi runtime per process: initialisation and architecture selection.
+"""The kernel compiler and its runtime: one per process, chosen once.
 
-:func:`check_arch` tells whether a GPU arch works on this machine *before* any
-work starts: it initialises Taichi in a short-lived child process, because
-asking Taichi 1.7 for ``gpu`` on a machine without one can crash the process
-(segmentation fault) instead of raising. :func:`ensure_taichi` never resets a
-Taichi runtime that a host program initialised itself: it adopts it.
+cdnf_ti's kernels are written in the Taichi DSL and compile under either
+
+* ``taichi`` 1.7 (upstream; LLVM 15; wheels up to Python 3.12), the default where it is
+  installed: with the lane-vectorised layout of :mod:`cdnf_ti.kernels.cdnf` it measured
+  about 3x less CPU time per frame than quadrants on the project's Zen 5 machines
+  (``docs/PERFORMANCE.md``), or
+* ``quadrants`` (``import quadrants as qd``; the maintained fork, LLVM 22, wheels for
+  Python 3.10-3.13+), the default where taichi has no wheel (Python 3.13).
+
+Both expose the same DSL (``ti.kernel``, ``ti.func``, ``ti.field``...). Kernel modules get the
+DSL module of the process's compiler from :func:`dsl`, so one statement of each kernel serves
+both. A process runs one compiler on one architecture (like Taichi itself, which allows one
+runtime per process): :func:`ensure_taichi` initialises it on first use; asking for another
+compiler or arch later is an error. The compiler is chosen, in this order, by the
+``compiler=`` argument of the first model (or ``--compiler`` on the command line), the
+``CDNF_TI_COMPILER`` environment variable, or the fastest one installed.
+
+:func:`check_arch` tells whether a GPU arch works on this machine *before* any work starts:
+it initialises the compiler in a short-lived child process, because asking Taichi 1.7 for
+``gpu`` on a machine without one can crash the process (segmentation fault) instead of
+raising. :func:`ensure_taichi` never resets a runtime that a host program initialised
+itself: it adopts it.
 """
 from __future__ import annotations
 
 import contextlib
+import importlib
+import importlib.util
 import io
 import os
 import subprocess
 import sys
 import threading
+import time
+from types import ModuleType
 
 from .errors import UserError
 
 ARCHS = ("cpu", "cuda", "vulkan", "gpu")
+#: Supported kernel compilers, fastest first (the default is the first one installed).
+COMPILERS = ("taichi", "quadrants")
+#: Environment variable naming the default compiler of a process.
+COMPILER_ENV = "CDNF_TI_COMPILER"
+#: Environment variable naming the compile-cache folder (optional).
+CACHE_ENV = "CDNF_TI_CACHE_DIR"
 
 _lock = threading.Lock()
 
-#: Architectures whose availability was already probed in this process: arch -> backend name or None.
-_probed: dict[str, str | None] = {}
+os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
+os.environ.setdefault("ENABLE_QUADRANTS_HEADER_PRINT", "False")
 
 _CPU_NAMES = ("x64", "arm64")
 #: Environment variable prefix recording a successful probe, so worker processes need not probe again.
 _ENV_OK = "CDNF_TI_ARCH_OK_"
+#: Architectures whose availability was already probed in this process: (compiler, arch) -> backend or None.
+_probed: dict[tuple[str, str], str | None] = {}
 
 
 class BackendUnavailableError(UserError):
-    """The requested Taichi architecture is not available on this machine."""
+    """The requested compiler or Taichi architecture is not available on this machine."""
 
 
 _arch: str | None = None
+_compiler: str | None = None
+_module: ModuleType | None = None
+#: Seconds spent in the compiler's ``init`` (import + runtime start), for start-up reports.
+init_seconds: float = 0.0
+
+
+def installed_compilers() -> tuple[str, ...]:
+    """The supported compilers importable in this environment, fastest first."""
+    return tuple(c for c in COMPILERS if importlib.util.find_spec(c) is not None)
+
+
+def default_compiler() -> str:
+    """The compiler a process uses when none is named.
+
+    ``$CDNF_TI_COMPILER`` when set, else the fastest installed one.
+
+    Raises
+    ------
+    BackendUnavailableError
+        Neither compiler is installed, or the environment variable names one that is not.
+    """
+    env = os.environ.get(COMPILER_ENV, "").strip().lower()
+    if env:
+        _check_compiler(env)
+        return env
+    have = installed_compilers()
+    if not have:
+        raise BackendUnavailableError("no kernel compiler installed: pip install quadrants (or taichi)")
+    return have[0]
+
+
+def _check_compiler(compiler: str) -> None:
+    if compiler not in COMPILERS:
+        raise UserError(f"unknown compiler {compiler!r}; choose one of {', '.join(COMPILERS)}")
+    if importlib.util.find_spec(compiler) is None:
+        raise BackendUnavailableError(
+            f"kernel compiler {compiler!r} is not installed in this Python; "
+            f"installed: {', '.join(installed_compilers()) or 'none'}"
+        )
+
+
+def select_compiler(compiler: str | None) -> None:
+    """Name the compiler this process will use (before its runtime starts).
+
+    ``None`` leaves the choice to :func:`default_compiler`. Raises :class:`UserError` if the
+    runtime already started with another compiler.
+    """
+    if compiler is None:
+        return
+    compiler = compiler.strip().lower()
+    _check_compiler(compiler)
+    with _lock:
+        if _compiler is not None and compiler != _compiler:
+            raise UserError(f"this process already runs its kernels with {_compiler!r}; "
+                            f"cannot switch to {compiler!r} (start a new process)")
+        os.environ[COMPILER_ENV] = compiler
+
 
 _PROBE = """
 import os, sys
 os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
-import taichi as ti
-ti.init(arch=getattr(ti, sys.argv[1]), log_level=ti.ERROR)
-print("ARCH=" + ti.lang.impl._ti_core.arch_name(ti.lang.impl.current_cfg().arch), flush=True)
+os.environ.setdefault("ENABLE_QUADRANTS_HEADER_PRINT", "False")
+import importlib
+ti = importlib.import_module(sys.argv[1])
+ti.init(arch=getattr(ti, sys.argv[2]), log_level=ti.ERROR)
+impl = ti.lang.impl
+core = getattr(impl, "_ti_core", None) or getattr(impl, "_qd_core")
+print("ARCH=" + core.arch_name(impl.current_cfg().arch), flush=True)
 """
 
 
@@ -50,15 +140,15 @@ def _unavailable(arch: str, why: str = "no driver/device found") -> BackendUnava
 
 
 def check_arch(arch: str, timeout: float = 120.0) -> str:
-    """Check, without touching this process's Taichi runtime, that ``arch`` works here.
+    """Check, without touching this process's runtime, that ``arch`` works here.
 
-    ``cpu`` is always available. For a GPU arch a child process initialises
-    Taichi on it (a few seconds, once per process).
+    ``cpu`` is always available. For a GPU arch a child process initialises the
+    process's compiler on it (a few seconds, once per process).
 
     Returns
     -------
     str
-        The Taichi backend the arch resolves to (``"cpu"``, ``"cuda"``, ``"vulkan"``, ...).
+        The backend the arch resolves to (``"cpu"``, ``"cuda"``, ``"vulkan"``, ...).
 
     Raises
     ------
@@ -73,90 +163,123 @@ def check_arch(arch: str, timeout: float = 120.0) -> str:
         return "cpu"
     if _arch is not None and (_arch == arch or (arch == "gpu" and _arch != "cpu")):
         return _arch  # already running on it in this process
-    known = os.environ.get(_ENV_OK + arch)  # probed by a parent process (workers inherit the answer)
-    if arch not in _probed and known:
-        _probed[arch] = known
-    if arch not in _probed:
+    compiler = _compiler or default_compiler()
+    key = (compiler, arch)
+    env_key = f"{_ENV_OK}{compiler}_{arch}"
+    known = os.environ.get(env_key)  # probed by a parent process (workers inherit the answer)
+    if key not in _probed and known:
+        _probed[key] = known
+    if key not in _probed:
         try:
-            proc = subprocess.run([sys.executable, "-c", _PROBE, arch], capture_output=True, text=True,
+            proc = subprocess.run([sys.executable, "-c", _PROBE, compiler, arch], capture_output=True, text=True,
                                   timeout=timeout, env={**os.environ, "TI_LOG_LEVEL": "error"})
             got = [ln[5:] for ln in proc.stdout.splitlines() if ln.startswith("ARCH=")]
-            _probed[arch] = got[0] if proc.returncode == 0 and got and got[0] not in _CPU_NAMES else None
+            _probed[key] = got[0] if proc.returncode == 0 and got and got[0] not in _CPU_NAMES else None
         except (OSError, subprocess.TimeoutExpired):
-            _probed[arch] = None
-    if _probed[arch] is None:
+            _probed[key] = None
+    if _probed[key] is None:
         raise _unavailable(arch)
-    os.environ[_ENV_OK + arch] = _probed[arch]  # type: ignore[assignment]
-    return _probed[arch]  # type: ignore[return-value]
+    os.environ[env_key] = _probed[key]  # type: ignore[assignment]
+    return _probed[key]  # type: ignore[return-value]
 
 
-def _host_runtime_arch() -> str | None:
-    """The arch of a Taichi runtime some other code already initialised in this process, or None."""
-    if "taichi" not in sys.modules:
+def _arch_name(ti: ModuleType) -> str:
+    impl = ti.lang.impl
+    core = getattr(impl, "_ti_core", None) or impl._qd_core
+    return core.arch_name(impl.current_cfg().arch)
+
+
+def _host_runtime(name: str) -> tuple[str, ModuleType] | None:
+    """The (arch, module) of a runtime of compiler ``name`` that other code already started here, or None."""
+    if name not in sys.modules:
         return None
     try:
-        import taichi as ti
-
+        ti = sys.modules[name]
         if ti.lang.impl.get_runtime().prog is None:
             return None
-        name = ti.lang.impl._ti_core.arch_name(ti.lang.impl.current_cfg().arch)
+        got = _arch_name(ti)
     except Exception:  # noqa: BLE001 - internal API moved: behave as if not initialised
         return None
-    return "cpu" if name in _CPU_NAMES else name
+    return ("cpu" if got in _CPU_NAMES else got), ti
 
 
-def ensure_taichi(arch: str = "cpu") -> str:
-    """Initialise Taichi once per process on ``arch`` and return the arch in use.
+def ensure_taichi(arch: str = "cpu", compiler: str | None = None) -> str:
+    """Initialise the kernel compiler once per process on ``arch``; return the arch in use.
 
-    If the host program already initialised Taichi, that runtime is adopted as
-    it is (never reset), provided it runs on the requested arch.
+    A runtime that the host program already started (``ti.init`` before cdnf_ti was
+    used) is adopted as it is, never reset.
 
     Parameters
     ----------
     arch : {"cpu", "cuda", "vulkan", "gpu"}
         Requested backend. ``cpu`` is the default and always available.
+    compiler : {"quadrants", "taichi"} or None
+        Kernel compiler; ``None``: the one already running, else :func:`default_compiler`.
 
     Raises
     ------
     UserError
-        Unknown ``arch``, or a different arch than the one this process
-        already runs (Taichi allows one runtime per process).
+        Unknown ``arch``/``compiler``, or a different one than this process already runs
+        (one runtime per process).
     BackendUnavailableError
-        The requested GPU backend is not available on this machine.
+        The compiler is not installed, or the GPU backend is not available here.
     """
-    global _arch
+    global _arch, _compiler, _module, init_seconds
     if arch not in ARCHS:
         raise UserError(f"unknown arch {arch!r}; choose one of {', '.join(ARCHS)}")
+    if compiler is not None:
+        select_compiler(compiler)
+    name = default_compiler()
     with _lock:
         if _arch is None:
-            _arch = _host_runtime_arch()
+            host = _host_runtime(name)
+            if host is not None:
+                (_arch, _module), _compiler = host, name
         if _arch is not None:
             if arch != _arch and not (arch == "gpu" and _arch not in ("cpu",)):
                 raise UserError(
-                    f"Taichi is already running on {_arch!r} in this process; "
+                    f"{_compiler} is already running on {_arch!r} in this process; "
                     f"cannot switch to {arch!r} (start a new process)"
                 )
             return _arch
-        if arch != "cpu":
-            check_arch(arch)  # a missing GPU can crash ti.init; find out in a child process first
-        import taichi as ti
-
-        with contextlib.redirect_stdout(io.StringIO()):  # Taichi prints "[Taichi] Starting on arch=..."
-            ti.init(
-                arch=getattr(ti, arch),
-                default_fp=ti.f32,
-                default_ip=ti.i32,
-                offline_cache=True,
-                log_level=ti.WARN,
-            )
-        got_name = ti.lang.impl._ti_core.arch_name(ti.lang.impl.current_cfg().arch)
-        if arch != "cpu" and got_name in _CPU_NAMES:  # fell back to the CPU after all
-            _arch = "cpu"
+    if arch != "cpu":
+        check_arch(arch)  # a missing GPU can crash init; find out in a child process first
+    with _lock:
+        t0 = time.perf_counter()
+        ti = importlib.import_module(name)
+        kw = dict(default_fp=ti.f32, default_ip=ti.i32, offline_cache=True, log_level=ti.ERROR)
+        if os.environ.get(CACHE_ENV):  # compile cache folder (default: the compiler's, in ~/.cache)
+            kw["offline_cache_file_path"] = os.environ[CACHE_ENV]
+        # both print "[Taichi|Quadrants] Starting on arch=..."
+        with contextlib.redirect_stdout(io.StringIO()):
+            ti.init(arch=getattr(ti, arch), **kw)
+        got_name = _arch_name(ti)
+        if arch != "cpu" and got_name in _CPU_NAMES:
+            # no such device: the compiler fell back to the CPU; say so instead of running slowly
+            _arch, _compiler, _module = "cpu", name, ti
             raise _unavailable(arch)
         _arch = "cpu" if got_name in _CPU_NAMES else got_name
+        _compiler, _module = name, ti
+        init_seconds = time.perf_counter() - t0
         return _arch
 
 
+def dsl() -> ModuleType:
+    """The DSL module (``taichi`` or ``quadrants``) of this process's runtime.
+
+    Starts the runtime with the defaults (``cpu``, :func:`default_compiler`) if needed.
+    Kernel modules do ``ti = dsl()`` instead of ``import taichi as ti``.
+    """
+    if _module is None:
+        ensure_taichi(_arch or "cpu")
+    return _module  # type: ignore[return-value]
+
+
 def current_arch() -> str | None:
-    """The arch Taichi was initialised with in this process, or ``None``."""
+    """The arch the runtime was initialised with in this process, or ``None``."""
     return _arch
+
+
+def current_compiler() -> str | None:
+    """The compiler running this process's kernels, or ``None`` before the runtime starts."""
+    return _compiler

@@ -1,6 +1,8 @@
 """Shared Taichi helpers: border handling, rational tanh, work partitioning."""
 
-import taichi as ti
+from ..taichi_runtime import dsl
+
+ti = dsl()  # taichi or quadrants: the same DSL
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 

@@ -10,7 +10,9 @@ the authors' C# code. Loops run over (row, column-block) work items
 The NumPy float64 oracle of every stage is :mod:`cdnf_ti.baselines_reference`.
 """
 
-import taichi as ti
+from ..taichi_runtime import dsl
+
+ti = dsl()  # taichi or quadrants: the same DSL
 
 from .common import block_span, fill, luminance_change  # noqa: F401 - fill is part of this module's kernel set
 

@@ -8,7 +8,9 @@ as separable row/column passes with a replicate border. NumPy float64 oracle:
 :class:`cdnf_ti.baselines_reference.NumpySDNFBackend`.
 """
 
-import taichi as ti
+from ..taichi_runtime import dsl
+
+ti = dsl()  # taichi or quadrants: the same DSL
 
 from .common import REPLICATE, block_span, dog_column_sum, dog_row_pass, fill, luminance_change, tanh_rational  # noqa: F401
 

@@ -7,7 +7,9 @@ NumPy float64 references of the same equations live next to their callers
 (:mod:`cdnf_ti.stimuli.incoherent`, :mod:`cdnf_ti.stimuli.rain`).
 """
 
-import taichi as ti
+from ..taichi_runtime import dsl
+
+ti = dsl()  # taichi or quadrants: the same DSL
 
 from .common import REFLECT, block_span, border_index, fill
 

@@ -29,7 +29,7 @@ from typing import Iterable, Iterator
 import numpy as np
 
 from ..frames import to_grey
-from ..taichi_runtime import current_arch, ensure_taichi
+from ..taichi_runtime import current_arch, dsl, ensure_taichi
 from .basic import check_seed
 
 #: The paper's frame size for 500 droplets per frame (height, width).
@@ -202,8 +202,7 @@ class _TaichiRain:
 
     def __init__(self, shape: tuple[int, int], params: RainParams):
         ensure_taichi(current_arch() or "cpu")
-        # lazy: taichi (or quadrants) is chosen at run time by ensure_taichi
-        import taichi as ti
+        ti = dsl()  # taichi or quadrants, chosen at run time
 
         from ..kernels import stimuli as K
         from ..kernels.common import COLUMN_BLOCKS

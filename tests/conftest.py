@@ -1,17 +1,19 @@
 """Shared fixtures: one Taichi runtime per test session, small stimuli, shared data."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED_REAL = REPO.parent / "shared" / "data" / "real"
+# the shared material next to the repository, or where $CDNF_TI_SHARED points
+SHARED_REAL = Path(os.environ.get("CDNF_TI_SHARED", REPO.parent / "shared")) / "data" / "real"
 
 
 @pytest.fixture(scope="session", autouse=True)
 def taichi_runtime():
-    """Initialise Taichi on the CPU once for the whole session."""
+    """Initialise the kernel compiler ($CDNF_TI_COMPILER, else the fastest) on the CPU once per session."""
     from cdnf_ti.taichi_runtime import ensure_taichi
 
     return ensure_taichi("cpu")

@@ -1,4 +1,6 @@
-"""The benchmark peers (SciPy, OpenCV+NumPy) compute the same C-DNF as the reference."""
+"""The benchmark peers (SciPy, OpenCV+NumPy, PyTorch when installed) compute the same C-DNF as the reference."""
+import importlib.util
+
 import numpy as np
 import pytest
 from conftest import small_stimulus
@@ -7,7 +9,8 @@ from cdnf_ti import CDNF, CDNFParams
 from cdnf_ti.bench.inputs import basic_frames, standin_video
 from cdnf_ti.bench.peers import PeerCDNF, available_peers
 
-PEERS = ["scipy", "opencv"]
+# torch is the bench-only extra (pip install ".[bench]"); its peer is tested wherever it is installed
+PEERS = ["scipy", "opencv"] + (["torch"] if importlib.util.find_spec("torch") is not None else [])
 
 
 @pytest.mark.parametrize("peer", PEERS)
@@ -65,9 +68,12 @@ def test_bench_command_prints_one_row_per_model_and_peer(capsys):
     header = out.splitlines()[0]
     assert "frames/s" in header and "x opencv" in header and "x scipy" in header
     rows = [line for line in out.splitlines() if line.startswith("| cdnf")]
-    # basic + real footage, each: the model and its two peers
-    assert len(rows) == 6
+    # basic + real footage, each: C-DNF (Chebyshev and plain) under each compiler, and every peer
+    from cdnf_ti.taichi_runtime import installed_compilers
+
+    assert len(rows) == 2 * (2 * len(installed_compilers()) + len(available_peers()))
     assert sum("cdnf[opencv]" in r for r in rows) == 2
+    assert all(c in out for c in installed_compilers())
 
 
 def test_bench_command_rejects_a_missing_clip_with_one_line(capsys):

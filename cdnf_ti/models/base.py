@@ -20,7 +20,7 @@ from tqdm import tqdm
 
 from ..atomic import atomic_write_text
 from ..frames import to_grey
-from ..taichi_runtime import ensure_taichi
+from ..taichi_runtime import ensure_taichi, select_compiler
 
 
 class NotConvergedWarning(RuntimeWarning):
@@ -246,6 +246,9 @@ class Model:
         Taichi architecture (``cpu`` default; ``cuda``/``vulkan`` where available).
     fps : float
         Frame rate of the input (models with time constants need it).
+    compiler : {"quadrants", "taichi"} or None
+        Kernel compiler of the process (see :mod:`cdnf_ti.taichi_runtime`); ``None``: the
+        one running, else the fastest installed.
     """
 
     name: ClassVar[str] = ""
@@ -263,7 +266,8 @@ class Model:
         """Default value of the swept quantity (None: unknown)."""
         return None
 
-    def __init__(self, params: Any = None, *, backend: str = "taichi", arch: str = "cpu", fps: float = 30.0):
+    def __init__(self, params: Any = None, *, backend: str = "taichi", arch: str = "cpu", fps: float = 30.0,
+                 compiler: str | None = None):
         if backend not in self.BACKENDS:
             raise ValueError(f"{self.name}: unknown backend {backend!r}; choose one of {self.BACKENDS}")
         if not (fps > 0):
@@ -273,6 +277,9 @@ class Model:
             raise TypeError(f"{self.name}: params must be {self.params_type.__name__}")
         self.backend_name = backend
         self.arch = arch
+        if backend == "taichi" and compiler is not None:
+            select_compiler(compiler)  # before any kernel module is imported
+        self.compiler = compiler
         self.fps = float(fps)
         self._unconverged = 0
         self._be: ModelBackend | None = None

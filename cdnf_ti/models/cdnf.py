@@ -34,7 +34,9 @@ class TaichiCDNFBackend:
         from ..taichi_runtime import ensure_taichi
 
         ensure_taichi(arch)
-        import taichi as ti
+        from ..taichi_runtime import dsl
+
+        ti = dsl()
 
         from ..kernels import cdnf as K
         from ..kernels.common import BORDER_CODES, COLUMN_BLOCKS
@@ -87,10 +89,10 @@ class TaichiCDNFBackend:
     def clear_input(self) -> None:
         self.K.fill(self.P, 0.0)
 
-    def contrast_iterate(self, lam: float) -> tuple[float, float]:
+    def contrast_iterate(self, lam: float, mom: float = 0.0) -> tuple[float, float]:
         c, n = self.c, 1 - self.c
         r = self.K.contrast_iterate(self.P, self.u_on[c], self.u_off[c], self.u_on[n], self.u_off[n],
-                                    *self.wc, self.params.h, lam, self.blocks, self.mode)
+                                    *self.wc, self.params.h, lam, mom, self.blocks, self.mode)
         self.c = n
         return float(r[0]), float(r[1])
 
@@ -99,11 +101,11 @@ class TaichiCDNFBackend:
         self.K.summation_input(self.u_on[self.c], self.u_off[self.c], self.S,
                                p.alpha_on, p.alpha_off, THETA_SCALE)
 
-    def summation_iterate(self, lam: float) -> tuple[float]:
+    def summation_iterate(self, lam: float, mom: float = 0.0) -> tuple[float]:
         p = self.params
         s, n = self.s, 1 - self.s
         r = self.K.summation_iterate(self.S, self.v[s], self.row1, self.row2, self.v[n], self.g1, self.g2,
-                                     p.A, p.B, p.h, lam, self.blocks, self.mode)
+                                     p.A, p.B, p.h, lam, mom, self.blocks, self.mode)
         self.s = n
         return (float(r),)
 
@@ -132,7 +134,9 @@ class _LaneWorkspace:
     _pool: "dict[tuple[int, int], _LaneWorkspace]" = {}
 
     def __init__(self, shape: tuple[int, int]):
-        import taichi as ti
+        from ..taichi_runtime import dsl
+
+        ti = dsl()
 
         from ..kernels.cdnf import LANES, TILE_ROWS, lane_layout, tile_blocks
 
@@ -152,6 +156,9 @@ class _LaneWorkspace:
         for g in ("c", "s"):
             self.tiles[g] = dict(act=ti.field(ti.i32, self.n_tiles), chg=ti.field(ti.i32, self.n_tiles),
                                  lst=ti.field(ti.i32, self.n_tiles), cnt=ti.field(ti.i32, ()))
+        from ..kernels.cdnf import MAX_STEPS
+
+        self.rbuf = ti.field(ti.f32, (MAX_STEPS, 2))  # per-update residuals of a multi-step launch
         self.owner = None  # weakref to the backend whose state is resident
 
     def all_active(self) -> None:
@@ -203,7 +210,9 @@ class LaneTaichiCDNFBackend:
         ensure_taichi(arch)
         from ..kernels import cdnf as K
         from ..kernels.common import BORDER_CODES
+        from ..taichi_runtime import dsl
 
+        self.ti = dsl()
         self.K = K
         self.params = params
         self.shape = tuple(shape)
@@ -218,8 +227,8 @@ class LaneTaichiCDNFBackend:
         k /= k.sum()
         self.k = (float(k[1]), float(k[0]))
         g1, g2 = dog_profiles(params)
-        self._sum_kernel = K.lanes_summation_kernel(tuple(float(x) for x in g1.astype(np.float32)),
-                                                    tuple(float(x) for x in g2.astype(np.float32)))
+        self._taps = (tuple(float(x) for x in g1.astype(np.float32)), tuple(float(x) for x in g2.astype(np.float32)))
+        self._tol32 = float(np.float32(params.tol))
         self.u0, self.v0 = resting_levels(params)
         self.c = 0
         self.s = 0
@@ -301,15 +310,43 @@ class LaneTaichiCDNFBackend:
         self.K.lanes_fill(ws.P, 0.0)
         ws.all_active()
 
-    def contrast_iterate(self, lam: float) -> tuple[float, float]:
+    def warm_up(self, steps: int) -> None:
+        """Compile the multi-step kernels for both buffer parities now, not mid-run.
+
+        The kernels take the ping-pong buffers as template arguments, so each order is a
+        separate compilation. Updates with ``lam = mom = 0`` leave every value as it is.
+        """
+        for n in sorted({1, steps}):
+            for _ in range(2):
+                self.contrast_iterate_many([(0.0, 0.0)] * n)
+                self.summation_input()  # also takes the contrast buffers by parity
+                self.summation_iterate_many([(0.0, 0.0)] * n)
+                self.mean_activation()
+        self._acquire().all_active()
+
+    def _done(self, res: list[tuple[float, ...]]) -> list[tuple[float, ...]]:
+        """The updates a multi-step launch performed: up to the first with every residual <= tol."""
+        for j, r in enumerate(res):
+            if max(r) <= self._tol32:
+                return res[: j + 1]
+        return res
+
+    def contrast_iterate(self, lam: float, mom: float = 0.0) -> tuple[float, float]:
+        return self.contrast_iterate_many([(lam, mom)])[0]
+
+    def contrast_iterate_many(self, coefs) -> list[tuple[float, float]]:
+        """Several ON/OFF updates in one launch (``coefs``: ``(lam, mom)`` each); see the solver."""
         ws = self._acquire()
-        c, n = self.c, 1 - self.c
+        c = self.c
         t = ws.tiles["c"]
-        r = self.K.lanes_contrast_iterate(ws.P, ws.u_on[c], ws.u_off[c], ws.u_on[n], ws.u_off[n],
-                                          *self.k, self.params.h, lam, self.tau, self.bs, self.nblk,
-                                          t["act"], t["chg"], t["lst"], t["cnt"], self.W, self.mode)
-        self.c = n
-        return float(r[0]), float(r[1])
+        kern = self.K.lanes_contrast_kernel(len(coefs))
+        flat = [float(x) for cm in coefs for x in cm]
+        r = kern(ws.P, ws.u_on[c], ws.u_off[c], ws.u_on[1 - c], ws.u_off[1 - c], *self.k, self.params.h,
+                 self.ti.Vector(flat), self.tau, self._tol32, self.bs, self.nblk,
+                 t["act"], t["chg"], t["lst"], t["cnt"], ws.rbuf, self.W, self.mode)
+        res = self._done([(float(r[2 * j]), float(r[2 * j + 1])) for j in range(len(coefs))])
+        self.c = (c + len(res)) % 2
+        return res
 
     def summation_input(self) -> None:
         ws = self._acquire()
@@ -318,15 +355,22 @@ class LaneTaichiCDNFBackend:
         self.K.lanes_summation_input(ws.u_on[self.c], ws.u_off[self.c], ws.S, p.alpha_on, p.alpha_off,
                                      THETA_SCALE, self.W, self.bs, self.nblk, t["act"], t["chg"], t["lst"], t["cnt"])
 
-    def summation_iterate(self, lam: float) -> tuple[float]:
+    def summation_iterate(self, lam: float, mom: float = 0.0) -> tuple[float]:
+        return self.summation_iterate_many([(lam, mom)])[0]
+
+    def summation_iterate_many(self, coefs) -> list[tuple[float]]:
+        """Several Summation updates in one launch (``coefs``: ``(lam, mom)`` each)."""
         ws = self._acquire()
         p = self.params
-        s, n = self.s, 1 - self.s
+        s = self.s
         t = ws.tiles["s"]
-        r = self._sum_kernel(ws.S, ws.v[s], ws.row1, ws.row2, ws.v[n], p.A, p.B, p.h, lam, self.tau,
-                             self.bs, self.nblk, t["act"], t["chg"], t["lst"], t["cnt"], self.W, self.mode)
-        self.s = n
-        return (float(r),)
+        kern = self.K.lanes_summation_kernel(*self._taps, len(coefs))
+        flat = [float(x) for cm in coefs for x in cm]
+        r = kern(ws.S, ws.v[s], ws.v[1 - s], ws.row1, ws.row2, p.A, p.B, p.h, self.ti.Vector(flat), self.tau,
+                 self._tol32, self.bs, self.nblk, t["act"], t["chg"], t["lst"], t["cnt"], ws.rbuf, self.W, self.mode)
+        res = self._done([(float(r[j]),) for j in range(len(coefs))])
+        self.s = (s + len(res)) % 2
+        return res
 
     def mean_activation(self) -> float:
         ws = self._acquire()
@@ -353,7 +397,8 @@ class CDNF(Model):
 
     Each frame: ``P = L(t) - L(t-1)`` splits into ON/OFF contrasts; the ON and
     OFF fields and then the Summation field are solved to their stationary
-    state by damped fixed-point iteration; ``I_v = sigmoid(mean theta([v]+))``
+    state (Chebyshev semi-iteration by default, ``CDNFParams.scheme``; the
+    stopping rule is the plain map's residual); ``I_v = sigmoid(mean theta([v]+))``
     and ``spike = I_v > 0.5 + epsilon``. Frame 0 gives ``I_v = 0.5``, no spike.
 
     Parameters
@@ -365,6 +410,9 @@ class CDNF(Model):
         Taichi architecture (taichi backend only).
     fps : float
         Input frame rate (unused by the equations; kept for the interface).
+    compiler : {"quadrants", "taichi"} or None
+        Kernel compiler (one per process, see :mod:`cdnf_ti.taichi_runtime`);
+        ``None``: the one running, else the fastest installed.
 
     Notes
     -----
@@ -402,6 +450,10 @@ class CDNF(Model):
         out = np.asarray(trace.output, dtype=np.float64)
         return [out > cls.params_type(epsilon=float(v)).threshold for v in values]
 
+    def _setup(self) -> None:
+        # Chebyshev bounds from the kernels' spectra, once per model
+        self._bounds = self.params.chebyshev_bounds() if self.params.scheme == "chebyshev" else (None, None)
+
     @property
     def threshold(self) -> float:
         return self.params.threshold
@@ -418,27 +470,34 @@ class CDNF(Model):
         # The resting state for this frame size and border: the solution with no input.
         be.clear_input()
         self._solve(be)
+        if hasattr(be, "warm_up"):
+            be.warm_up(self.params.steps_per_launch)
         be.save_rest()
 
     def _solve(self, be) -> tuple[SolveReport, SolveReport]:
         p = self.params
-        kw = dict(tol=p.tol, max_iter=p.max_iter, min_damping=p.min_damping, stall_patience=p.stall_patience)
-        rc = solve_fixed_point(be.contrast_iterate, 2, damping=p.damping * p.contrast_relaxation, **kw)
+        kw = dict(tol=p.tol, max_iter=p.max_iter, min_damping=p.min_damping, stall_patience=p.stall_patience,
+                  steps=p.steps_per_launch)
+        bc, bs = self._bounds
+        rc = solve_fixed_point(be.contrast_iterate, 2, damping=p.damping * p.contrast_relaxation, bounds=bc,
+                               iterate_many=getattr(be, "contrast_iterate_many", None), **kw)
         be.summation_input()
-        rs = solve_fixed_point(be.summation_iterate, 1, damping=p.damping, **kw)
+        rs = solve_fixed_point(be.summation_iterate, 1, damping=p.damping, bounds=bs,
+                               iterate_many=getattr(be, "summation_iterate_many", None), **kw)
         return rc, rs
 
     def _step(self, t: int, grey: np.ndarray, loaded: None) -> StepResult:
         """The equations of one frame; see :class:`StepResult`.
 
-        Diagnostics: ``iterations_on/off/sum``, ``residual_on/off/sum``,
-        ``damping_sum`` (the relaxation in force at the end of the Summation solve).
+        Diagnostics: ``iterations_on/off/sum``, ``residual_on/off/sum`` (the plain map's
+        ``max |F(u) - u|``), ``damping_sum`` (the plain relaxation in force at the end of
+        the Summation solve) and ``restarts`` (Chebyshev safeguard restarts/fallbacks).
         """
         be = self._be
         if t == 0:
             be.restore_rest()
             diag = dict(iterations_on=0, iterations_off=0, iterations_sum=0,
-                        residual_on=0.0, residual_off=0.0, residual_sum=0.0, damping_sum=1.0)
+                        residual_on=0.0, residual_off=0.0, residual_sum=0.0, damping_sum=1.0, restarts=0)
             return StepResult(t, 0.5, False, True, diag)
         if not self.params.warm_start:
             be.restore_rest()
@@ -448,6 +507,6 @@ class CDNF(Model):
         diag = dict(
             iterations_on=rc.iterations[0], iterations_off=rc.iterations[1], iterations_sum=rs.iterations[0],
             residual_on=rc.residuals[0], residual_off=rc.residuals[1], residual_sum=rs.residuals[0],
-            damping_sum=rs.damping,
+            damping_sum=rs.damping, restarts=rc.restarts + rs.restarts,
         )
         return StepResult(t, i_v, bool(i_v > self.params.threshold), converged, diag)

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..baselines_reference import NumpyLGMD2Backend
 from ..params import ModelParams, check_params, sigmoid
-from ..taichi_runtime import ensure_taichi
+from ..taichi_runtime import dsl, ensure_taichi
 from .base import Model, StepResult, Trace
 from .registry import register_model
 
@@ -207,9 +207,7 @@ class TaichiLGMDBackend:
 
     def _nd(self) -> Any:
         """A new (H, W) float32 ndarray, zeroed by :meth:`reset`."""
-        # lazy: taichi (or quadrants) is chosen at run time by ensure_taichi
-        import taichi as ti
-
+        ti = dsl()  # taichi or quadrants, chosen at run time
         a = ti.ndarray(ti.f32, self.shape)
         self._arrays.append(a)
         return a

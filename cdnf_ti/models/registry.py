@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Any, TypeVar
 
+from ..taichi_runtime import select_compiler
 from .base import Model
 
 #: Registered models by name, in registration order (``--models all`` runs them in this order).
@@ -59,6 +60,12 @@ def get_model_class(name: str) -> type[Model]:
     raise ValueError(f"unknown model {name!r}; available: {', '.join(MODELS)}")
 
 
-def create_model(name: str, params: Any = None, **kwargs: Any) -> Model:
-    """Instantiate a registered model: ``create_model("cdnf", backend="numpy")``."""
+def create_model(name: str, params: Any = None, *, compiler: str | None = None, **kwargs: Any) -> Model:
+    """Instantiate a registered model: ``create_model("cdnf", backend="numpy")``.
+
+    ``compiler`` ("quadrants" or "taichi") names the process's kernel compiler
+    (:func:`cdnf_ti.taichi_runtime.select_compiler`); ``None`` keeps the default.
+    """
+    if compiler is not None and kwargs.get("backend", "taichi") == "taichi":
+        select_compiler(compiler)
     return get_model_class(name)(params, **kwargs)

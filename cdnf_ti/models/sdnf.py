@@ -48,7 +48,7 @@ import numpy as np
 
 from ..baselines_reference import NumpySDNFBackend
 from ..params import THETA_SCALE, CDNFParams, ModelParams, check_params, dog_radius, gaussian_profile, sigmoid, theta
-from ..taichi_runtime import ensure_taichi
+from ..taichi_runtime import dsl, ensure_taichi
 from .base import Model, StepResult, Trace
 from .registry import register_model
 
@@ -158,8 +158,7 @@ class TaichiSDNFBackend:
 
     def __init__(self, params: SDNFParams, shape: tuple[int, int], arch: str = "cpu"):
         ensure_taichi(arch)
-        # lazy: taichi (or quadrants) is chosen at run time by ensure_taichi
-        import taichi as ti
+        ti = dsl()
 
         from ..kernels import sdnf as K
         from ..kernels.common import COLUMN_BLOCKS

@@ -1,0 +1,107 @@
+"""The kernel compiler layer: quadrants and taichi run the same kernels, one per process."""
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cdnf_ti.taichi_runtime import (
+    COMPILER_ENV,
+    COMPILERS,
+    current_compiler,
+    ensure_taichi,
+    installed_compilers,
+    select_compiler,
+)
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _run(args, compiler, timeout=900, code=None):
+    env = dict(os.environ, **{COMPILER_ENV: compiler})
+    cmd = [sys.executable, "-c", code] if code is not None else [sys.executable, "-m", "cdnf_ti.run", *args]
+    return subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=timeout)
+
+
+def test_the_process_runs_the_compiler_it_was_asked_for():
+    want = os.environ.get(COMPILER_ENV) or installed_compilers()[0]
+    assert current_compiler() == want
+
+
+def test_the_default_is_the_first_installed_of_taichi_then_quadrants():
+    assert COMPILERS == ("taichi", "quadrants")
+    assert installed_compilers() and set(installed_compilers()) <= set(COMPILERS)
+
+
+def test_switching_compiler_inside_a_process_is_a_clear_error():
+    other = [c for c in COMPILERS if c != current_compiler()][0]
+    with pytest.raises(ValueError, match="start a new process"):
+        select_compiler(other)
+    with pytest.raises(ValueError, match="unknown compiler"):
+        ensure_taichi("cpu", "gcc")
+    assert ensure_taichi("cpu", current_compiler()) == "cpu"  # naming the running one is fine
+
+
+_CHECK = """
+import numpy as np
+from cdnf_ti import create_model, CDNFParams
+from cdnf_ti.models import MODELS
+from cdnf_ti.taichi_runtime import current_compiler
+from cdnf_ti.stimuli.basic import basic_stimulus
+st = basic_stimulus("dark_looming", height=64, width=72, start_half_size=1.2)
+frames = list(st.frames())
+for name in MODELS:
+    a = create_model(name).run(frames)
+    b = create_model(name, backend="numpy").run(frames)
+    print(current_compiler(), name, float(np.max(np.abs(a.output - b.output))), bool(a.converged.all()))
+"""
+
+
+@pytest.mark.parametrize("compiler", installed_compilers())
+def test_every_model_agrees_with_its_reference_under_each_compiler(compiler):
+    # a fresh process per compiler: every kernel module compiles under it and matches float64
+    proc = _run(None, compiler, code=_CHECK)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    lines = [ln.split() for ln in proc.stdout.strip().splitlines()]
+    assert len(lines) >= 5
+    for comp, name, diff, conv in lines:
+        assert comp == compiler
+        assert float(diff) < 1e-4, (name, diff)
+        assert conv == "True", name
+
+
+def test_compiler_option_on_the_command_line(tmp_path):
+    other = [c for c in installed_compilers() if c != current_compiler()]
+    comp = other[0] if other else current_compiler()
+    proc = _run(["stim:dark_looming?size=48", "--compiler", comp, "--out", str(tmp_path), "--no-progress"], "")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert (tmp_path / "dark_looming.cdnf.csv").exists() or list(tmp_path.glob("*.cdnf.csv"))
+
+
+def test_unknown_compiler_on_the_command_line_is_a_usage_error(tmp_path):
+    proc = _run(["stim:dark_looming?size=48", "--compiler", "gcc", "--out", str(tmp_path)], "")
+    assert proc.returncode == 2
+    assert "--compiler" in proc.stderr
+
+
+@pytest.mark.parametrize("compiler", installed_compilers())
+def test_cuda_arch_runs_or_fails_with_one_line(compiler, tmp_path):
+    # on a GPU machine the CUDA path runs; elsewhere it is a one-line error, exit code 2
+    proc = _run(["stim:dark_looming?size=48", "--arch", "cuda", "--out", str(tmp_path), "--no-progress"], compiler)
+    if proc.returncode == 0:
+        assert list(tmp_path.glob("*.cdnf.csv"))
+    else:
+        assert proc.returncode == 2
+        err = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+        assert len(err) == 1 and err[0].startswith("error:") and "cuda" in err[0], proc.stderr
+
+
+def test_kernel_modules_take_their_dsl_from_the_runtime():
+    from cdnf_ti.kernels import cdnf, common, lgmd, sdnf, stimuli
+    from cdnf_ti.taichi_runtime import dsl
+
+    for mod in (cdnf, common, lgmd, sdnf, stimuli):
+        assert mod.ti is dsl()
+    assert np.isfinite(float(cdnf.MAX_STEPS))
