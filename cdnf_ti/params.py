@@ -14,7 +14,7 @@ with ``vartheta(a) = 2 / (1 + exp(-a)) - 1 = tanh(a / 2)`` and
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import numpy as np
