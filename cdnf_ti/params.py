@@ -124,7 +124,8 @@ class CDNFParams(ModelParams):
     damping : float
         Initial relaxation ``lambda`` in ``u <- (1 - lambda) u + lambda F(u)`` (1.0).
     contrast_relaxation : float
-        Relaxation of the ON/OFF fields' iteration (1.0, MODEL.md's ``lambda = 1``).
+        Relaxation of the ON/OFF fields' plain iteration (1.0, MODEL.md's ``lambda = 1``;
+        used by ``scheme="plain"`` and the Chebyshev safeguard's fallback).
         The contrast map's Jacobian ``0.5 sech^2(.) W_c`` has its spectrum in
         [0, 1/2] (``W_c`` is positive definite with eigenvalues <= 1), so any value
         in (0, 2) converges to the same fixed point; 4/3 is optimal (error factor

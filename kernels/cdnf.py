@@ -16,13 +16,20 @@ float64 NumPy reference of the same equations is :mod:`cdnf_ti.reference`.
 import functools
 
 from ..taichi_runtime import dsl
+from .common import (  # noqa: F401 - fill is part of this module's kernel set
+    REFLECT,
+    REPLICATE,
+    block_span,
+    border_index,
+    border_weight,
+    dog_column_sum,
+    dog_row_pass,
+    fill,
+    luminance_change,
+    tanh_rational,
+)
 
 ti = dsl()  # taichi or quadrants: the same DSL
-
-from .common import (  # noqa: F401 - fill is part of this module's kernel set
-    REFLECT, REPLICATE, block_span, border_index, border_weight, dog_column_sum, dog_row_pass, fill,
-    luminance_change, tanh_rational,
-)
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)

@@ -11,10 +11,9 @@ The NumPy float64 oracle of every stage is :mod:`cdnf_ti.baselines_reference`.
 """
 
 from ..taichi_runtime import dsl
+from .common import block_span, fill, luminance_change  # noqa: F401 - fill is part of this module's kernel set
 
 ti = dsl()  # taichi or quadrants: the same DSL
-
-from .common import block_span, fill, luminance_change  # noqa: F401 - fill is part of this module's kernel set
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 VEC2D = ti.types.vector(2, ti.f64)

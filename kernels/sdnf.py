@@ -9,10 +9,9 @@ as separable row/column passes with a replicate border. NumPy float64 oracle:
 """
 
 from ..taichi_runtime import dsl
+from .common import REPLICATE, block_span, dog_column_sum, dog_row_pass, fill, luminance_change, tanh_rational  # noqa: F401
 
 ti = dsl()  # taichi or quadrants: the same DSL
-
-from .common import REPLICATE, block_span, dog_column_sum, dog_row_pass, fill, luminance_change, tanh_rational  # noqa: F401
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)

@@ -8,10 +8,9 @@ NumPy float64 references of the same equations live next to their callers
 """
 
 from ..taichi_runtime import dsl
+from .common import REFLECT, block_span, border_index, fill
 
 ti = dsl()  # taichi or quadrants: the same DSL
-
-from .common import REFLECT, block_span, border_index, fill
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
