@@ -307,9 +307,7 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
             return _run_locked(folder, labels_path, labels, files, out, models, conditions, padding, seed,
                                workers, scheduler, backend, arch, progress, figures, rain_params, on_record)
         except KeyboardInterrupt:
-            from .parallel import stop_all_pools
-
-            stop_all_pools()
+            parallel.stop_all_pools()
             remove_stale_temps(out)  # the workers stopped mid-write leave no half-written files
             raise
 
