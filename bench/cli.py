@@ -25,6 +25,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ..models.base import NotConvergedWarning
+
 RESOLUTIONS = ((240, 426), (600, 600))
 
 
@@ -89,7 +91,7 @@ def reference_outputs(model_name: str, frames: Sequence[np.ndarray]) -> np.ndarr
     except (ValueError, TypeError):
         return None
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+        warnings.simplefilter("ignore", NotConvergedWarning)  # recorded per frame in "converged"
         return np.array([m.step(f).output for f in frames], dtype=float)
 
 
@@ -137,7 +139,7 @@ def model_rows(models: Sequence[str], inputs, repeats: int, reference: bool, bar
             ref = reference_outputs(name, frames) if reference else None
             for scheme, params in variants:
                 with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
+                    warnings.simplefilter("ignore", NotConvergedWarning)  # recorded per frame in "converged"
                     fps, out, diag = time_model(lambda: create_model(name, params, backend="taichi"), frames, repeats)
                 if bar is not None:
                     bar.update(1)

@@ -28,6 +28,7 @@ from .experiments.layout import trace_path
 from .frames import iter_grey, to_grey
 from .inputs import resolve_input
 from .models import create_model
+from .models.base import NotConvergedWarning
 from .video import codec_for, write_video
 
 #: Fields shown per model (first three found), and their colour scale: "signed" (symmetric about 0) or "pos".
@@ -151,7 +152,7 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
         for t, frame in enumerate(frames):
             grey = to_grey(frame)
             with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
+                warnings.simplefilter("ignore", NotConvergedWarning)  # recorded per frame in "converged"
                 res = model.step(grey)
             if "count" in res.diagnostics and n_ts is not None:
                 uses_count = True

@@ -5,6 +5,8 @@ against :mod:`cdnf_ti.reference` on generated stimuli (basic, incoherent,
 dashcam-like stand-in video) and on every border mode, at widths that are and
 are not multiples of the lane width.
 """
+import threading
+
 import numpy as np
 import pytest
 from conftest import small_stimulus
@@ -14,6 +16,7 @@ from cdnf_ti.bench.inputs import standin_video
 from cdnf_ti.kernels.cdnf import tile_blocks
 from cdnf_ti.models.cdnf import LaneTaichiCDNFBackend, TaichiCDNFBackend
 from cdnf_ti.reference import NumpyCDNFBackend
+from cdnf_ti.stimuli.basic import basic_stimulus
 from cdnf_ti.stimuli.incoherent import incoherent_stimulus
 
 BORDERS = ["replicate", "reflect", "zero"]
@@ -169,3 +172,25 @@ def test_restoring_rest_reactivates_every_tile():
     t = model._be.ws.tiles
     assert t["c"]["cnt"][None] == model._be.ws.n_tiles
     assert t["s"]["cnt"][None] == model._be.ws.n_tiles
+
+
+def test_models_sharing_a_lane_workspace_in_threads_give_their_sequential_results():
+    """Two C-DNF models of one frame size share the lane workspace; run in two threads at once
+    (as in a Dask worker with several threads) each still gives what it gives alone."""
+    def frames(name):
+        return list(basic_stimulus(name, height=96, width=96, start_half_size=2.0).frames())
+
+    stims = {"dark_looming": frames("dark_looming"), "light_translating": frames("light_translating")}
+    alone = {k: CDNF().run(v).output for k, v in stims.items()}
+    together: dict = {}
+
+    def work(name):
+        together[name] = CDNF().run(stims[name]).output
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in stims]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    for k in stims:
+        np.testing.assert_allclose(together[k], alone[k], rtol=0, atol=1e-7)

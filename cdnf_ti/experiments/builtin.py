@@ -15,7 +15,7 @@ import numpy as np
 from ..atomic import atomic_write_json, atomic_write_text
 from ..demo import format_table1
 from ..models import create_model
-from ..models.base import Trace
+from ..models.base import NotConvergedWarning, Trace
 from ..paper import TABLE1
 from ..stimuli.basic import BASIC_STIMULI, PAPER_LABELS, basic_stimulus
 from ..stimuli.incoherent import incoherent_stimulus
@@ -80,7 +80,7 @@ def run_stimulus_task(task: StimulusTask) -> dict:
     fps = float(getattr(stim, "fps", 30.0))
     model = create_model(task.model, backend=task.backend, arch=task.arch, fps=fps)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+        warnings.simplefilter("ignore", NotConvergedWarning)  # recorded per frame in "converged"
         tr = model.run(_frames_of(stim), progress=False)
     tr.to_csv(task.trace_file)
     return {"model": task.model, "stimulus": task.stimulus, "coherence": task.coherence,

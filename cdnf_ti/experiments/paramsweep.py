@@ -41,7 +41,7 @@ from ..atomic import atomic_write_json
 from ..errors import InputError, UserError
 from ..frames import iter_grey, open_source
 from ..models import create_model, get_model_class
-from ..models.base import Trace
+from ..models.base import NotConvergedWarning, Trace
 from ..stimuli.rain import RainyFrames
 from .clipscores import choose_level, correctness_matrix, cross_validated_accuracy, roc
 from .labels import read_labels, validate_dataset
@@ -277,7 +277,7 @@ def run_sweep_task(task: SweepTask) -> dict:
             frames = _resized(frames, task.downscale)
         t0 = time.perf_counter()
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+            warnings.simplefilter("ignore", NotConvergedWarning)  # recorded per frame in "converged"
             trace = model.run(frames)
         wall = time.perf_counter() - t0
     except (InputError, ValueError, RuntimeError, OSError) as e:

@@ -44,6 +44,7 @@ import numpy as np
 from ..atomic import atomic_write_json, atomic_write_text
 from ..errors import UserError
 from ..models import create_model
+from ..models.base import NotConvergedWarning
 from ..paper import TABLE1
 from ..stimuli.basic import basic_stimulus
 from ..stimuli.grating import GratingStimulus
@@ -256,7 +257,7 @@ def run_grid_task(task: GridTask) -> dict:
     fps = float(stim.fps)
     model = create_model(task.model, backend=task.backend, arch=task.arch, fps=fps)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+        warnings.simplefilter("ignore", NotConvergedWarning)  # recorded per frame in "converged"
         tr = model.run(stim.frames(), progress=False)
     tr.to_csv(task.trace_file)
     spikes = [int(i) for i, s in enumerate(tr.spike) if s]

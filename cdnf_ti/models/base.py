@@ -8,6 +8,7 @@ supplies its equations and state through hooks. :class:`ModelBackend` and
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import time
@@ -303,10 +304,11 @@ class Model:
         model's equations (:meth:`_step`).
         """
         grey = self._prepare(frame)
-        t = self._t
-        loaded = self._be.load(grey, t == 0)
-        self._t += 1
-        result = self._step(t, grey, loaded)
+        with self._backend_lock():
+            t = self._t
+            loaded = self._be.load(grey, t == 0)
+            self._t += 1
+            result = self._step(t, grey, loaded)
         if not result.converged:
             self._unconverged += 1
         return result
@@ -316,13 +318,19 @@ class Model:
         self._t = 0
         self._reset_state()
         if self._be is not None:
-            self._be.reset()
+            with self._backend_lock():
+                self._be.reset()
 
     def fields(self) -> dict[str, np.ndarray]:
         """Copies of the model's inner layers/fields, each (H, W), for pictures (empty before a frame)."""
         if self._be is None:
             return {}
-        return {k: np.asarray(v) for k, v in self._be.fields().items()}
+        with self._backend_lock():
+            return {k: np.asarray(v) for k, v in self._be.fields().items()}
+
+    def _backend_lock(self) -> Any:
+        """The lock of a backend whose buffers are shared with other models (else a no-op context)."""
+        return getattr(self._be, "lock", None) or contextlib.nullcontext()
 
     def _prepare(self, frame: np.ndarray) -> np.ndarray:
         """Grey (H, W) frame; builds the backend at the first frame, then checks the size."""
@@ -338,7 +346,8 @@ class Model:
         """Build the backend for frames of ``shape`` (H, W) and make it this model's."""
         make = self._taichi_backend if self.backend_name == "taichi" else self._numpy_backend
         backend = make(tuple(shape))
-        self._init_backend(backend)
+        with getattr(backend, "lock", None) or contextlib.nullcontext():
+            self._init_backend(backend)
         self._be = backend
         return backend
 

@@ -6,6 +6,7 @@ float64). Convergence control: :mod:`cdnf_ti.solver`.
 """
 from __future__ import annotations
 
+import threading
 from typing import Sequence
 
 import numpy as np
@@ -160,6 +161,9 @@ class _LaneWorkspace:
 
         self.rbuf = ti.field(ti.f32, (MAX_STEPS, 2))  # per-update residuals of a multi-step launch
         self.owner = None  # weakref to the backend whose state is resident
+        # One frame at a time per workspace: models of this size in other threads (a Dask worker
+        # with several threads, a host program's threads) wait instead of mixing their states.
+        self.lock = threading.RLock()
 
     def all_active(self) -> None:
         """Mark every tile of both groups active (after any change made outside the kernels)."""
@@ -168,12 +172,15 @@ class _LaneWorkspace:
         for t in self.tiles.values():
             tiles_all(t["act"], t["lst"], t["cnt"])
 
+    _pool_lock = threading.Lock()
+
     @classmethod
     def get(cls, shape: tuple[int, int]) -> "_LaneWorkspace":
-        ws = cls._pool.get(shape)
-        if ws is None:
-            ws = cls._pool[shape] = cls(shape)
-        return ws
+        with cls._pool_lock:
+            ws = cls._pool.get(shape)
+            if ws is None:
+                ws = cls._pool[shape] = cls(shape)
+            return ws
 
 
 class LaneTaichiCDNFBackend:
@@ -219,6 +226,7 @@ class LaneTaichiCDNFBackend:
         self.H, self.W = self.shape
         self.mode = BORDER_CODES[params.border]
         self.ws = _LaneWorkspace.get(self.shape)
+        self.lock = self.ws.lock  # held by the model around each frame (Model.step)
         self.bs, self.nblk = self.ws.bs, self.ws.nblk
         self.tau = float(params.tol) * self.freeze
         self._ref = weakref.ref(self)
@@ -235,7 +243,8 @@ class LaneTaichiCDNFBackend:
         self._saved: dict[str, np.ndarray] | None = None
         self._rest: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._fresh = True
-        self._acquire()
+        with self.lock:
+            self._acquire()
 
     # -- workspace ownership -----------------------------------------------
     _STATE = ("L", "P", "S")
