@@ -66,8 +66,25 @@ PAPER_LABELS = {
 }
 
 
+class FrameStream:
+    """Mixin for a stimulus with ``n_frames`` and ``frame(k)``: streams its frames, one at a time."""
+
+    n_frames: int
+
+    def frame(self, k: int) -> np.ndarray:  # pragma: no cover - supplied by the stimulus
+        raise NotImplementedError
+
+    def frames(self) -> Iterator[np.ndarray]:
+        """Yield every frame in order, (H, W) float32 grey in [0, 1] each."""
+        for k in range(self.n_frames):
+            yield self.frame(k)
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        return self.frames()
+
+
 @dataclass(frozen=True)
-class BasicStimulus:
+class BasicStimulus(FrameStream):
     """Parameters of one basic stimulus.
 
     Attributes
@@ -252,14 +269,6 @@ class BasicStimulus:
             return f
         f[y0:y1, x0:x1] = self.object_value
         return f
-
-    def frames(self) -> Iterator[np.ndarray]:
-        """Yield every frame in order."""
-        for k in range(self.n_frames):
-            yield self.frame(k)
-
-    def __iter__(self) -> Iterator[np.ndarray]:
-        return self.frames()
 
     def to_dict(self) -> dict:
         return asdict(self)

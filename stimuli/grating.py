@@ -17,11 +17,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from typing import Iterator
 
 import numpy as np
 
-from .basic import BACKENDS, check_seed, taichi_stimulus_kernels
+from .basic import BACKENDS, FrameStream, check_seed, taichi_stimulus_kernels
 
 ORIENTATIONS = ("vertical", "horizontal")
 
@@ -45,7 +44,7 @@ def grating_numpy(height: int, width: int, shift: int, period: int, bar: int, ve
 
 
 @dataclass(frozen=True)
-class GratingStimulus:
+class GratingStimulus(FrameStream):
     """A drifting square-wave grating, generated frame by frame.
 
     Attributes
@@ -154,14 +153,6 @@ class GratingStimulus:
         K.render_grating(out, sh, self.period, self.bar_width, int(self.vertical), self.bar_grey,
                          self.background_grey, blocks)
         return out
-
-    def frames(self) -> Iterator[np.ndarray]:
-        """Yield every frame in order (one at a time)."""
-        for k in range(self.n_frames):
-            yield self.frame(k)
-
-    def __iter__(self) -> Iterator[np.ndarray]:
-        return self.frames()
 
     def to_dict(self) -> dict:
         return {"name": "grating", **asdict(self)}
