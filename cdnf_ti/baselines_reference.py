@@ -225,19 +225,22 @@ class NumpyFLGMDBackend(_NumpyLGMDBase):
         self.ON0 = half_wave_on(self.P, self.ON_prev, p.clip, p.dc)
         self.OFF0 = half_wave_off(self.P, self.OFF_prev, p.clip, p.dc)
         self.ON, self.OFF = self.ON0.copy(), self.OFF0.copy()
+        self._before = (self.ON, self.OFF)  # the iterate before the current one (Chebyshev momentum)
 
     def _local(self, x: np.ndarray, x_prev: np.ndarray, w_i: float) -> np.ndarray:
         return np.maximum(correlate3(x, self.g_e) - w_i * delayed_spread(x, x_prev, self.k, self.a), 0.0)
 
-    def feedback_iterate(self, lam: float) -> tuple[float, float]:
-        """One relaxed update ``X <- X + lam (T(X) - X)``, ``T(X) = [X0 + beta S_X(X)]+``."""
+    def feedback_iterate(self, lam: float, mom: float = 0.0) -> tuple[float, float]:
+        """One update ``X <- X + mom (X - X_before) + lam (T(X) - X)``, ``T(X) = [X0 + beta S_X(X)]+``."""
         p = self.params
         s_on = self._local(self.ON, self.ON_prev, p.w_i_on)
         s_off = self._local(self.OFF, self.OFF_prev, p.w_i_off)
         d_on = np.maximum(self.ON0 + p.beta_on * s_on, 0.0) - self.ON
         d_off = np.maximum(self.OFF0 + p.beta_off * s_off, 0.0) - self.OFF
-        self.ON = self.ON + lam * d_on
-        self.OFF = self.OFF + lam * d_off
+        on_b, off_b = self._before
+        self._before = (self.ON, self.OFF)
+        self.ON = self.ON + mom * (self.ON - on_b) + lam * d_on
+        self.OFF = self.OFF + mom * (self.OFF - off_b) + lam * d_off
         return float(np.abs(d_on).max()), float(np.abs(d_off).max())
 
     def finish(self) -> float:

@@ -130,23 +130,24 @@ def summation_input(u_on: F2, u_off: F2, S: F2, alpha_on: ti.f32, alpha_off: ti.
 def summation_iterate(
     S: F2, v: F2, row1: F2, row2: F2, out: F2, g1: F1, g2: F1,
     A: ti.f32, B: ti.f32, h: ti.f32, lam: ti.f32, mom: ti.f32,
-    blocks: ti.i32, mode: ti.template(),
+    blocks: ti.i32, mode: ti.template(), R: ti.template(),
 ) -> ti.f32:
     """One update of the Summation field (see :func:`field_update`; ``out``: previous iterate).
 
     The DoG ``W_s = A g1 g1^T - B g2 g2^T`` is applied as separable passes:
     ``row1 = g1 (*)_x v``, ``row2 = g2 (*)_x v``, then
     ``W_s (*) v = A g1 (*)_y row1 - B g2 (*)_y row2`` (exact for every border
-    mode). ``F(v) = S - h + vartheta(W_s (*) v)``; returns ``max|F(v) - v|``.
+    mode; ``R``: the compile-time radius of ``g1``/``g2``).
+    ``F(v) = S - h + vartheta(W_s (*) v)``; returns ``max|F(v) - v|``.
     """
     H, W = v.shape[0], v.shape[1]
-    dog_row_pass(v, row1, row2, g1, g2, blocks, mode)
+    dog_row_pass(v, row1, row2, g1, g2, blocks, mode, R)
     res = 0.0
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
         m = 0.0
         for j in range(j0, j1):
-            lateral = dog_column_sum(row1, row2, g1, g2, A, B, i, j, mode)
+            lateral = dog_column_sum(row1, row2, g1, g2, A, B, i, j, mode, R)
             nv, dv = field_update(S[i, j], lateral, v[i, j], out[i, j], h, lam, mom)
             out[i, j] = nv
             m = ti.max(m, ti.abs(dv))

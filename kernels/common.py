@@ -79,20 +79,20 @@ def block_span(k, width, blocks):
 
 @ti.func
 def dog_row_pass(v: ti.template(), row1: ti.template(), row2: ti.template(), g1: ti.template(),
-                 g2: ti.template(), blocks, mode: ti.template()):
+                 g2: ti.template(), blocks, mode: ti.template(), R: ti.template()):
     """Horizontal passes of a separable DoG: ``row1 = g1 (*)_x v``, ``row2 = g2 (*)_x v``.
 
-    ``g1``/``g2`` are 1-D profiles of length ``2R + 1``. Called at a kernel's top
-    level, the loop is the kernel's parallel loop over (row, column-block) items.
+    ``g1``/``g2`` are 1-D profiles of length ``2R + 1`` (``R`` a compile-time radius:
+    the taps unroll). Called at a kernel's top level, the loop is the kernel's
+    parallel loop over (row, column-block) items.
     """
     H, W = v.shape[0], v.shape[1]
-    R = (g1.shape[0] - 1) // 2
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
         for j in range(j0, j1):
             a1 = 0.0
             a2 = 0.0
-            for d in range(-R, R + 1):
+            for d in ti.static(range(-R, R + 1)):
                 x = border_weight(j + d, W, mode) * v[i, border_index(j + d, W, mode)]
                 a1 += g1[d + R] * x
                 a2 += g2[d + R] * x
@@ -102,13 +102,12 @@ def dog_row_pass(v: ti.template(), row1: ti.template(), row2: ti.template(), g1:
 
 @ti.func
 def dog_column_sum(row1: ti.template(), row2: ti.template(), g1: ti.template(), g2: ti.template(),
-                   A, B, i, j, mode: ti.template()):
-    """Vertical pass at (i, j): ``A g1 (*)_y row1 - B g2 (*)_y row2`` = ``W_s (*) v``."""
+                   A, B, i, j, mode: ti.template(), R: ti.template()):
+    """Vertical pass at (i, j): ``A g1 (*)_y row1 - B g2 (*)_y row2`` = ``W_s (*) v`` (radius ``R``, unrolled)."""
     H = row1.shape[0]
-    R = (g1.shape[0] - 1) // 2
     b1 = 0.0
     b2 = 0.0
-    for d in range(-R, R + 1):
+    for d in ti.static(range(-R, R + 1)):
         ii = border_index(i + d, H, mode)
         wgt = border_weight(i + d, H, mode)
         b1 += g1[d + R] * wgt * row1[ii, j]

@@ -46,22 +46,22 @@ def _act(u, theta_scale):
 @ti.kernel
 def field_update(
     E: F2, F: F2, row1: F2, row2: F2, u_new: F2, F_new: F2, g1: F1, g2: F1,
-    A: ti.f32, B_t: ti.f32, h: ti.f32, theta_scale: ti.f32, blocks: ti.i32,
+    A: ti.f32, B_t: ti.f32, h: ti.f32, theta_scale: ti.f32, blocks: ti.i32, R: ti.template(),
 ) -> ti.f64:
     """``u_new = E - h + vartheta(A g1g1 (*) F - B_t g2g2 (*) F)``, ``F_new = f(u_new)``;
     returns ``sum F_new``.
 
     ``F = f(u(t-1))`` is the previous frame's firing rate (time-delayed lateral
-    interaction); ``vartheta(a) = tanh(a / 2)``.
+    interaction); ``vartheta(a) = tanh(a / 2)``; ``R``: the DoG radius (``g1``/``g2`` have ``2R + 1`` taps).
     """
     H, W = F.shape[0], F.shape[1]
-    dog_row_pass(F, row1, row2, g1, g2, blocks, REPLICATE)
+    dog_row_pass(F, row1, row2, g1, g2, blocks, REPLICATE, R)
     total = ti.f64(0.0)
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
         acc = ti.f64(0.0)
         for j in range(j0, j1):
-            v = E[i, j] - h + tanh_rational(0.5 * dog_column_sum(row1, row2, g1, g2, A, B_t, i, j, REPLICATE))
+            v = E[i, j] - h + tanh_rational(0.5 * dog_column_sum(row1, row2, g1, g2, A, B_t, i, j, REPLICATE, R))
             u_new[i, j] = v
             f = _act(v, theta_scale)
             F_new[i, j] = f

@@ -94,3 +94,66 @@ def test_model_is_documented_as_a_reconstruction():
     import cdnf_ti.models.flgmd as mod
 
     assert "RECONSTRUCTION" in FLGMDONn.__doc__ and "own choice" in mod.__doc__
+
+
+def test_feedback_stencil_splits_the_local_summation_into_iterated_and_constant_parts():
+    from cdnf_ti.models.flgmd import feedback_stencil
+    from cdnf_ti.models.lgmd2 import lowpass_coefficient
+
+    rng = np.random.default_rng(3)
+    x, x_prev = rng.uniform(0, 40, (2, 30, 41))
+    p = FLGMDParams()
+    a = tuple(lowpass_coefficient(33, t) for t in p.tau_lateral)
+    k = kernel_3x3(0.0, *p.k_lateral)
+    direct = correlate3(x, p.excitation_kernel()) - p.w_i_on * delayed_spread(x, x_prev, k, kernel_3x3(0.0, *a))
+    c, e, d = feedback_stencil(p.excitation_kernel(), p.k_lateral, a, p.w_i_on)
+    q = p.w_i_on * correlate3(x_prev, kernel_3x3(0.0, *(kk * (1 - aa) for kk, aa in zip(p.k_lateral, a))))
+    split = correlate3(x, kernel_3x3(c, e, d)) - q
+    np.testing.assert_allclose(split, direct, atol=1e-12)
+
+
+def _periodic_operator(stencil: np.ndarray, n: int) -> np.ndarray:
+    """Matrix of the 3x3 correlation on an n x n torus."""
+    m = np.zeros((n * n, n * n))
+    for i in range(n):
+        for j in range(n):
+            for di in (-1, 0, 1):
+                for dj in (-1, 0, 1):
+                    m[i * n + j, ((i + di) % n) * n + (j + dj) % n] += stencil[di + 1, dj + 1]
+    return m
+
+
+@pytest.mark.parametrize("beta_on", [-0.5, 0.5])
+def test_chebyshev_bounds_hold_the_spectrum_of_the_feedback_jacobian(beta_on):
+    p = FLGMDParams(beta_on=beta_on)
+    lo, hi = p.chebyshev_bounds(33)
+    c, e, d = p.feedback_stencils(33)[0]
+    w = _periodic_operator(np.array([[d, e, d], [e, c, e], [d, e, d]]), 12)
+    mask = np.diag((np.random.default_rng(1).random(144) < 0.6).astype(float))
+    for jac in (beta_on * w, mask @ (beta_on * w) @ mask):  # all rectifiers active; a random active set
+        ev = np.linalg.eigvals(jac)
+        assert np.abs(ev.imag).max() < 1e-9
+        assert lo - 1e-9 <= ev.real.min() and ev.real.max() <= hi + 1e-9
+    assert (lo < -0.1) if beta_on < 0 else (hi > 0.1)  # the bounds are not trivially wide
+    assert -1 < lo <= 0 <= hi < 1
+
+
+def test_chebyshev_and_plain_schemes_reach_the_same_fixed_point_in_fewer_iterations():
+    frames = noisy_stream("light_looming", seed=11)
+    cheb = FLGMDONn(backend="numpy").run(frames)
+    plain = FLGMDONn(FLGMDParams(scheme="plain"), backend="numpy").run(frames)
+    assert cheb.converged.all() and plain.converged.all()
+    np.testing.assert_allclose(cheb.output, plain.output, atol=1e-5, rtol=0)
+    computed = plain.diagnostics["iterations"] > 0
+    assert cheb.diagnostics["iterations"][computed].mean() < 0.8 * plain.diagnostics["iterations"][computed].mean()
+
+
+def test_taichi_matches_numpy_reference_with_the_plain_scheme():
+    _, ta, _, nu = run_both(noisy_stream("dark_looming", seed=5, h=48, w=64), FLGMDParams(scheme="plain"))
+    np.testing.assert_allclose(ta.output, nu.output, atol=1e-5, rtol=0)
+    assert np.abs(ta.diagnostics["iterations"] - nu.diagnostics["iterations"]).max() <= 1
+
+
+def test_unknown_scheme_is_refused():
+    with pytest.raises(ValueError, match="scheme"):
+        FLGMDParams(scheme="anderson")

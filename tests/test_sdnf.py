@@ -28,6 +28,16 @@ def test_taichi_matches_numpy_reference_on_basic_stimulus(stim):
     np.testing.assert_array_equal(ta.spike, nu.spike)
 
 
+@pytest.mark.parametrize("radius", [1, 5])
+def test_taichi_matches_numpy_reference_at_other_kernel_radii(radius):
+    frames = noisy_stream("light_looming", seed=4, h=40, w=56)
+    p = SDNFParams(radius=radius)
+    a, b = SDNF(p, backend="taichi"), SDNF(p, backend="numpy")
+    ta, nu = a.run(frames), b.run(frames)
+    np.testing.assert_allclose(ta.output, nu.output, atol=1e-6, rtol=0)
+    np.testing.assert_allclose(a.fields()["u"], b.fields()["u"], atol=1e-4)
+
+
 def test_taichi_matches_numpy_reference_on_noisy_video_like_stream():
     frames = noisy_stream("dark_looming", seed=9)
     a, b = SDNF(backend="taichi"), SDNF(backend="numpy")

@@ -106,7 +106,7 @@ class TaichiCDNFBackend:
         p = self.params
         s, n = self.s, 1 - self.s
         r = self.K.summation_iterate(self.S, self.v[s], self.row1, self.row2, self.v[n], self.g1, self.g2,
-                                     p.A, p.B, p.h, lam, mom, self.blocks, self.mode)
+                                     p.A, p.B, p.h, lam, mom, self.blocks, self.mode, int(p.radius_s))
         self.s = n
         return (float(r),)
 

@@ -30,8 +30,10 @@ The reconstruction, per frame (grey levels 0..255, ``dt = 1000 // fps``):
   ``w_i = 0.5`` for both channels (LGMD1's ON value; for OFF an own choice:
   the OFF channel uses the same excitation/inhibition layout as ON, unlike
   LGMD1's swapped OFF layout, so that the Gaussian excitation applies to both);
-* instantaneous feedback: ``X = [X0 + beta_X S_X(X)]+``, solved by relaxed
-  fixed-point iteration to ``tol`` (:func:`cdnf_ti.solver.solve_fixed_point`),
+* instantaneous feedback: ``X = [X0 + beta_X S_X(X)]+``, solved to ``tol``
+  (:func:`cdnf_ti.solver.solve_fixed_point`: Chebyshev semi-iteration with the
+  bounds of :meth:`FLGMDParams.chebyshev_bounds` by default, or the relaxed plain
+  iteration with ``scheme="plain"``; the fixed point and the stopping rule are the same),
   ``beta_on = -0.5`` (own choice, negative = ONn), ``beta_off = 0``;
   contraction is guaranteed when
   ``|beta| (sum G_e + w_i sum K) < 1`` (checked: 0.5 x 1.75 = 0.875);
@@ -40,11 +42,12 @@ The reconstruction, per frame (grey levels 0..255, ``dt = 1000 // fps``):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from ..baselines_reference import NumpyFLGMDBackend
-from ..params import ModelParams, check_params, contrast_kernel
+from ..params import ModelParams, check_params, contrast_kernel, kernel_spectrum
 from ..solver import solve_fixed_point
 from .lgmd1 import LGMD1, LGMD1Params, lgmd1_checks
 from .lgmd2 import TaichiLGMDBackend, lowpass_coefficient
@@ -72,7 +75,10 @@ class FLGMDParams(ModelParams):
     max_iter : int
         Iteration cap per frame (100).
     damping, min_damping, stall_patience :
-        Relaxation schedule of :func:`cdnf_ti.solver.solve_fixed_point`.
+        Relaxation schedule of the plain scheme (and of the Chebyshev safeguard's
+        fallback), see :func:`cdnf_ti.solver.solve_fixed_point`.
+    scheme : {"chebyshev", "plain"}
+        Iteration scheme of the feedback solve (same fixed point and stopping rule).
     """
 
     beta_on: float = -0.5
@@ -99,6 +105,7 @@ class FLGMDParams(ModelParams):
     damping: float = 1.0
     min_damping: float = 1.0 / 16.0
     stall_patience: int = 4
+    scheme: str = "chebyshev"
 
     def __post_init__(self) -> None:
         check_params("FLGMDParams", lgmd1_checks(self) + [
@@ -114,6 +121,7 @@ class FLGMDParams(ModelParams):
             (self.tol > 0, f"tol must be > 0, got {self.tol}"),
             (int(self.max_iter) == self.max_iter and self.max_iter >= 1, "max_iter must be a positive integer"),
             (0 < self.min_damping <= self.damping <= 1, "need 0 < min_damping <= damping <= 1"),
+            (self.scheme in ("chebyshev", "plain"), f"scheme must be 'chebyshev' or 'plain', got {self.scheme!r}"),
         ])
 
     def contraction(self, channel: str = "on") -> float:
@@ -129,9 +137,63 @@ class FLGMDParams(ModelParams):
         """The 3x3 normalised Gaussian ``G_e``, shape (3, 3)."""
         return contrast_kernel(self.sigma_e)
 
+    def feedback_stencils(self, dt: int) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """:func:`feedback_stencil` of the ON and OFF channels at frame interval ``dt`` (ms)."""
+        a = tuple(lowpass_coefficient(dt, t) for t in self.tau_lateral)
+        ge = self.excitation_kernel()
+        return (feedback_stencil(ge, self.k_lateral, a, self.w_i_on),
+                feedback_stencil(ge, self.k_lateral, a, self.w_i_off))
+
+    def chebyshev_bounds(self, dt: int) -> tuple[float, float]:
+        """Interval ``[a, b]`` holding the spectrum of the feedback map's Jacobian.
+
+        ``T(X) = [X0 + beta [W_x (*) X - Q]+]+`` has the Jacobian
+        ``D2 beta D1 W_x`` (``D1``, ``D2``: 0/1 masks of the active rectifiers), so its
+        eigenvalues lie in the hull of ``{0} U beta [min W_x^, max W_x^]``
+        (:func:`cdnf_ti.params.kernel_spectrum`), taken over the iterated channels.
+        """
+        lo, hi = 0.0, 0.0
+        for beta, (c, e, d) in zip((self.beta_on, self.beta_off), self.feedback_stencils(dt)):
+            if beta == 0.0:
+                continue
+            s_lo, s_hi = kernel_spectrum(np.array([[d, e, d], [e, c, e], [d, e, d]]))
+            lo = min(lo, beta * s_lo, beta * s_hi)
+            hi = max(hi, beta * s_lo, beta * s_hi)
+        return lo, hi
+
+
+def feedback_stencil(ge: np.ndarray, k_lateral: tuple[float, float], a: tuple[float, float],
+                     w_i: float) -> tuple[float, float, float]:
+    """The 3x3 stencil ``W_x = G_e - w_i a K`` that the feedback iteration applies to ``X``.
+
+    ``S_X(X) = [G_e (*) X - w_i sum K (a X + (1 - a) X(t-1))]+ = [W_x (*) X - Q]+`` with
+    ``Q = w_i sum K (1 - a) X(t-1)``, constant within a frame (K's centre is 0).
+
+    Parameters
+    ----------
+    ge : (3, 3) ndarray
+        The excitation kernel ``G_e``.
+    k_lateral, a : (edge, diagonal)
+        Weights of ``K`` and their delay coefficients ``a = dt / (dt + tau)``.
+    w_i : float
+        The channel's inhibition weight.
+
+    Returns
+    -------
+    (centre, edge, diagonal) : tuple of float
+    """
+    return (float(ge[1, 1]), float(ge[0, 1]) - w_i * k_lateral[0] * a[0],
+            float(ge[0, 0]) - w_i * k_lateral[1] * a[1])
+
 
 class TaichiFLGMDBackend(TaichiLGMDBackend):
-    """F-LGMD layers in Taichi (see :class:`FLGMDONn`): feedback iteration on the ON/OFF channels."""
+    """F-LGMD layers in Taichi (see :class:`FLGMDONn`): feedback iteration on the ON/OFF channels.
+
+    Per frame: :meth:`load` writes the drives ``ON0``/``OFF0``; :meth:`prepare` the
+    constant inhibition ``Q`` of both channels and the iterate's start;
+    :meth:`feedback_iterate` one relaxed update; :meth:`finish` the layers at the
+    fixed point.
+    """
 
     LAYERS = ("S_on", "S_off", "S", "G")
     #: Current, previous (settled) and scratch buffers per channel.
@@ -140,29 +202,35 @@ class TaichiFLGMDBackend(TaichiLGMDBackend):
     def _setup(self) -> None:
         p, dt = self.params, self.dt
         self.on0, self.off0 = self._nd(), self._nd()
+        self.q_on, self.q_off = self._nd(), self._nd()
         self.a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
-        ge = p.excitation_kernel()
-        self.ge = (float(ge[1, 1]), float(ge[0, 1]), float(ge[0, 0]))
+        self.w_on, self.w_off = p.feedback_stencils(dt)
 
     def reset(self) -> None:
         super().reset()
         self.pi = 1  # index of the previous (settled) buffers
         self.ni = 2  # scratch buffers
 
+    def _channel_targets(self) -> tuple[Any, Any, Any, Any]:
+        """The drives ``ON0``/``OFF0`` from the settled channels ``on[c]``/``off[c]``."""
+        return self.on0, self.off0, self.on[self.c], self.off[self.c]
+
     def prepare(self) -> None:
         # the settled current buffers become the previous ones
         self.pi, self.c = self.c, self.pi
         p = self.params
-        self.K.flgmd_prepare(self.P, self.on0, self.off0, self.on[self.c], self.off[self.c],
-                             self.on[self.pi], self.off[self.pi], p.clip, p.dc, self.blocks)
+        self.K.flgmd_prepare(self.on0, self.off0, self.on[self.c], self.off[self.c], self.on[self.pi],
+                             self.off[self.pi], self.q_on, self.q_off, *p.k_lateral, *self.a,
+                             p.w_i_on, p.w_i_off, self.blocks)
 
-    def feedback_iterate(self, lam: float) -> tuple[float, float]:
+    def feedback_iterate(self, lam: float, mom: float = 0.0) -> tuple[float, float]:
+        """One update ``X <- X + mom (X - X_prev) + lam (T(X) - X)``; returns the residuals before it."""
         p = self.params
-        c, n, q = self.c, self.ni, self.pi
+        c, n = self.c, self.ni
         with_off = p.beta_off != 0.0
-        r = self.K.flgmd_iterate(self.on0, self.off0, self.on[c], self.off[c], self.on[q], self.off[q],
-                                 self.on[n], self.off[n], *self.ge, *p.k_lateral, *self.a,
-                                 p.w_i_on, p.w_i_off, p.beta_on, p.beta_off, lam, self.blocks, with_off)
+        r = self.K.flgmd_iterate(self.on0, self.off0, self.on[c], self.off[c], self.q_on, self.q_off,
+                                 self.on[n], self.off[n], *self.w_on, *self.w_off,
+                                 p.beta_on, p.beta_off, lam, mom, self.blocks, with_off)
         if with_off:
             self.c, self.ni = n, c
         else:
@@ -172,10 +240,9 @@ class TaichiFLGMDBackend(TaichiLGMDBackend):
 
     def finish(self) -> float:
         p = self.params
-        c, q = self.c, self.pi
-        return float(self.K.flgmd_finish(self.on[c], self.off[c], self.on[q], self.off[q], self.S_on, self.S_off,
-                                         self.S, self.G, *self.ge, *p.k_lateral, *self.a, p.w_i_on, p.w_i_off,
-                                         p.t_s, self.blocks))
+        c = self.c
+        return float(self.K.flgmd_finish(self.on[c], self.off[c], self.q_on, self.q_off, self.S_on, self.S_off,
+                                         self.S, self.G, *self.w_on, *self.w_off, p.t_s, self.blocks))
 
     def hold(self) -> None:
         """FFI-held frame: the channels keep their previous values (nothing to do)."""
@@ -219,12 +286,17 @@ class FLGMDONn(LGMD1):
     def _held_diag(self) -> dict[str, float]:
         return dict(iterations=0, residual_on=0.0, residual_off=0.0)
 
+    def _setup(self) -> None:
+        super()._setup()
+        p = self.params
+        self._bounds = p.chebyshev_bounds(self.dt) if p.scheme == "chebyshev" else None
+
     def _run_layers(self) -> tuple[float, dict[str, float], bool]:
         p = self.params
         be = self._be
         be.prepare()
         rep = solve_fixed_point(be.feedback_iterate, 2, tol=p.tol, max_iter=p.max_iter, damping=p.damping,
-                                min_damping=p.min_damping, stall_patience=p.stall_patience)
+                                min_damping=p.min_damping, stall_patience=p.stall_patience, bounds=self._bounds)
         sum_g = be.finish()
         extra = dict(iterations=max(rep.iterations), residual_on=rep.residuals[0], residual_off=rep.residuals[1])
         return sum_g, extra, rep.converged

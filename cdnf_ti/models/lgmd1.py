@@ -112,11 +112,11 @@ class TaichiLGMD1Backend(TaichiLGMDBackend):
         self.a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
 
     def layers(self) -> float:
-        """ON/OFF, delayed spreads, S (thresholded), G; returns ``sum G``."""
+        """Delayed spreads, S (thresholded), G (ON/OFF from :meth:`load`); returns ``sum G``."""
         p = self.params
         c, q = self._next_buffers()
-        r = self.K.lgmd1_layers(self.P, self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.E_off,
-                                self.S, self.G, p.clip, p.dc, p.w_i_on, p.w_i_off, *p.k_lateral, *self.a,
+        r = self.K.lgmd1_layers(self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.E_off,
+                                self.S, self.G, p.w_i_on, p.w_i_off, *p.k_lateral, *self.a,
                                 p.w_on_exc, p.w_off_exc, p.w_onoff, p.t_s, self.blocks)
         return float(r)
 

@@ -221,8 +221,17 @@ class TaichiLGMDBackend:
         self.c = 0  # index of the current ON/OFF buffers
 
     def load(self, grey: np.ndarray, first: bool) -> float:
+        """Photoreceptors and this frame's ON/OFF channels (into :meth:`_channel_targets`); returns ``sum |P|``."""
         scale = 1.0 if grey.dtype == np.uint8 else 255.0
-        return float(self.K.load_frame(grey, self.L, self.P, scale, int(first), self.blocks))
+        p = self.params
+        return float(self.K.load_frame(grey, self.L, self.P, *self._channel_targets(), scale, int(first),
+                                       p.clip, p.dc, self.blocks))
+
+    def _channel_targets(self) -> tuple[Any, Any, Any, Any]:
+        """``(ON, OFF, ON(t-1), OFF(t-1))`` buffers of :meth:`load`: the next ping-pong buffers,
+        made current by :meth:`_next_buffers` when the layers run (an FFI-held frame keeps the old ones)."""
+        c, n = self.c, 1 - self.c
+        return self.on[n], self.off[n], self.on[c], self.off[c]
 
     def _next_buffers(self) -> tuple[int, int]:
         """Make the other ON/OFF buffers current: ``(current, previous)`` indices."""
@@ -249,11 +258,11 @@ class TaichiLGMD2Backend(TaichiLGMDBackend):
         self.af = tuple(lowpass_coefficient(dt, t) for t in p.tau_off)
 
     def layers(self, w_on: float, w_off: float) -> tuple[float, float]:
-        """ON/OFF, delayed inhibition, S, grouping; returns ``(sum G, max |Ce|)``."""
+        """Delayed inhibition, S, grouping (ON/OFF from :meth:`load`); returns ``(sum G, max |Ce|)``."""
         p = self.params
         c, q = self._next_buffers()
-        r = self.K.lgmd2_layers(self.P, self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.I_off,
-                                self.S, self.Ce, self.G, p.clip, p.dc, w_on, w_off,
+        r = self.K.lgmd2_layers(self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.I_off,
+                                self.S, self.Ce, self.G, w_on, w_off,
                                 *p.k_on, *self.an, *p.k_off, *self.af, p.w_on_exc, p.w_off_exc, p.w_onoff,
                                 p.delta_c, p.c_w, p.c_de, p.t_de, self.blocks)
         return float(r[0]), float(r[1])

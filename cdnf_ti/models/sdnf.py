@@ -196,7 +196,7 @@ class TaichiSDNFBackend:
         p = self.params
         c, n = self.c, 1 - self.c
         s = self.K.field_update(self.E, self.F[c], self.row1, self.row2, self.u[n], self.F[n], self.g1, self.g2,
-                                p.A, b_t, p.h, THETA_SCALE, self.blocks)
+                                p.A, b_t, p.h, THETA_SCALE, self.blocks, int(p.radius))
         self.c = n
         return float(s) / (self.shape[0] * self.shape[1])
 
