@@ -24,10 +24,14 @@ from .common import (  # noqa: F401 - fill is part of this module's kernel set
     block_span,
     border_index,
     border_weight,
-    dog_column_sum,
+    dog_column_run,
     dog_row_pass,
     fill,
     luminance_change,
+    row_runs,
+    run_load,
+    run_max,
+    run_store,
     tanh_rational,
 )
 
@@ -126,6 +130,17 @@ def summation_input(u_on: F2, u_off: F2, S: F2, alpha_on: ti.f32, alpha_off: ti.
         S[i, j] = alpha_on * a_on + alpha_off * a_off
 
 
+@ti.func
+def _summation_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
+    S, v, row1, row2, out, g1, g2 = ti.static(ctx[0], ctx[1], ctx[2], ctx[3], ctx[4], ctx[5], ctx[6])
+    A, B, h, lam, mom = ctx[7], ctx[8], ctx[9], ctx[10], ctx[11]
+    mode, R = ti.static(ctx[12], ctx[13])
+    lateral = dog_column_run(row1, row2, g1, g2, A, B, i, j, n, mode, R)
+    nv, dv = field_update(run_load(S, i, j, n), lateral, run_load(v, i, j, n), run_load(out, i, j, n), h, lam, mom)
+    run_store(out, i, j, nv, n)
+    return run_max(ti.abs(dv), n)
+
+
 @ti.kernel
 def summation_iterate(
     S: F2, v: F2, row1: F2, row2: F2, out: F2, g1: F1, g2: F1,
@@ -145,13 +160,8 @@ def summation_iterate(
     res = 0.0
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        m = 0.0
-        for j in range(j0, j1):
-            lateral = dog_column_sum(row1, row2, g1, g2, A, B, i, j, mode, R)
-            nv, dv = field_update(S[i, j], lateral, v[i, j], out[i, j], h, lam, mom)
-            out[i, j] = nv
-            m = ti.max(m, ti.abs(dv))
-        ti.atomic_max(res, m)
+        ti.atomic_max(res, ti.cast(row_runs(_summation_run, (S, v, row1, row2, out, g1, g2, A, B, h, lam, mom, mode, R),
+                                            i, j0, j1, H, W, "max", 1), ti.f32))
     return res
 
 

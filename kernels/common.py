@@ -77,6 +77,113 @@ def block_span(k, width, blocks):
     return i, j0, j1
 
 
+# -- row runs -----------------------------------------------------------------------
+# taichi 1.7 does not loop-vectorise ndarray loops (see kernels/cdnf.py), but it does
+# SLP-vectorise straight-line code. A row kernel therefore visits its columns in runs:
+# CHUNK consecutive columns at a time, written once as a function of vectors of n
+# columns (``run_load``/``run_store``), called with n = CHUNK where the 3x3 neighbours
+# are inside the frame and with n = 1 at the borders (neighbour columns clamped:
+# the replicate border) and for the last columns of a segment.
+
+CHUNK = 16
+
+
+@ti.func
+def run_load(x: ti.template(), i, j, n: ti.template()):
+    """``x[i, j .. j + n - 1]`` as a float32 vector of n values."""
+    v = ti.Vector([0.0] * n, dt=ti.f32)
+    for c in ti.static(range(n)):
+        v[c] = ti.cast(x[i, j + c], ti.f32)
+    return v
+
+
+@ti.func
+def run_store(x: ti.template(), i, j, v, n: ti.template()):
+    """``x[i, j .. j + n - 1] = v``."""
+    for c in ti.static(range(n)):
+        x[i, j + c] = v[c]
+
+
+@ti.func
+def run_sum(v, n: ti.template()):
+    """Sum of the n values of ``v``, accumulated in float64."""
+    s = ti.f64(0.0)
+    for c in ti.static(range(n)):
+        s += ti.cast(v[c], ti.f64)
+    return s
+
+
+@ti.func
+def run_max(v, n: ti.template()):
+    """Largest of the n values of ``v`` (float32)."""
+    m = v[0]
+    for c in ti.static(range(1, n)):
+        m = ti.max(m, v[c])
+    return m
+
+
+@ti.func
+def row_runs(body: ti.template(), ctx: ti.template(), i, j0, j1, H, W, reduce: ti.template(),
+             halo: ti.template()):
+    """Call ``body(ctx, im, i, ip, jm, j, jp, n)`` over the columns ``[j0, j1)`` of row ``i``.
+
+    ``im``/``ip`` are the rows above and below, ``jm``/``jp`` the first columns of the
+    left and right neighbours of the run ``j .. j + n - 1`` (clamped: replicate border).
+    Runs of ``n = CHUNK`` columns keep ``halo`` columns either side inside the frame
+    (``halo`` >= 1: the body's horizontal reach); every other column is a run of one.
+    Returns the ``reduce`` (``"sum"``: float64 sum; ``"max"``) of body's returns.
+    """
+    im = ti.min(ti.max(i - 1, 0), H - 1)
+    ip = ti.min(ti.max(i + 1, 0), H - 1)
+    acc = ti.f64(0.0)
+    if ti.static(reduce == "max"):
+        acc = 0.0
+    j = j0
+    while j < ti.min(j1, halo):
+        r = body(ctx, im, i, ip, ti.max(j - 1, 0), j, ti.min(j + 1, W - 1), 1)
+        if ti.static(reduce == "max"):
+            acc = ti.max(acc, r)
+        else:
+            acc += r
+        j += 1
+    end = ti.min(j1, W - halo)
+    while j + CHUNK <= end:
+        r = body(ctx, im, i, ip, j - 1, j, j + 1, CHUNK)
+        if ti.static(reduce == "max"):
+            acc = ti.max(acc, r)
+        else:
+            acc += r
+        j += CHUNK
+    while j < j1:
+        r = body(ctx, im, i, ip, j - 1, j, ti.min(j + 1, W - 1), 1)
+        if ti.static(reduce == "max"):
+            acc = ti.max(acc, r)
+        else:
+            acc += r
+        j += 1
+    return acc
+
+
+@ti.func
+def _dog_row_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
+    v, row1, row2, g1, g2 = ti.static(ctx[0], ctx[1], ctx[2], ctx[3], ctx[4])
+    mode, R = ti.static(ctx[5], ctx[6])
+    W = v.shape[1]
+    a1 = ti.Vector([0.0] * n, dt=ti.f32)
+    a2 = ti.Vector([0.0] * n, dt=ti.f32)
+    for d in ti.static(range(-R, R + 1)):
+        x = ti.Vector([0.0] * n, dt=ti.f32)
+        if ti.static(n == 1):  # a column near the border: map the tap into the frame
+            x[0] = border_weight(j + d, W, mode) * v[i, border_index(j + d, W, mode)]
+        else:  # a run with every tap inside the frame
+            x = run_load(v, i, j + d, n)
+        a1 += g1[d + R] * x
+        a2 += g2[d + R] * x
+    run_store(row1, i, j, a1, n)
+    run_store(row2, i, j, a2, n)
+    return 0.0
+
+
 @ti.func
 def dog_row_pass(v: ti.template(), row1: ti.template(), row2: ti.template(), g1: ti.template(),
                  g2: ti.template(), blocks, mode: ti.template(), R: ti.template()):
@@ -89,29 +196,22 @@ def dog_row_pass(v: ti.template(), row1: ti.template(), row2: ti.template(), g1:
     H, W = v.shape[0], v.shape[1]
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        for j in range(j0, j1):
-            a1 = 0.0
-            a2 = 0.0
-            for d in ti.static(range(-R, R + 1)):
-                x = border_weight(j + d, W, mode) * v[i, border_index(j + d, W, mode)]
-                a1 += g1[d + R] * x
-                a2 += g2[d + R] * x
-            row1[i, j] = a1
-            row2[i, j] = a2
+        row_runs(_dog_row_run, (v, row1, row2, g1, g2, mode, R), i, j0, j1, H, W, "sum", ti.max(R, 1))
 
 
 @ti.func
-def dog_column_sum(row1: ti.template(), row2: ti.template(), g1: ti.template(), g2: ti.template(),
-                   A, B, i, j, mode: ti.template(), R: ti.template()):
-    """Vertical pass at (i, j): ``A g1 (*)_y row1 - B g2 (*)_y row2`` = ``W_s (*) v`` (radius ``R``, unrolled)."""
+def dog_column_run(row1: ti.template(), row2: ti.template(), g1: ti.template(), g2: ti.template(),
+                   A, B, i, j, n: ti.template(), mode: ti.template(), R: ti.template()):
+    """Vertical pass on the run ``(i, j .. j + n - 1)``: ``A g1 (*)_y row1 - B g2 (*)_y row2`` = ``W_s (*) v``
+    (radius ``R``, unrolled; rows mapped by the border mode)."""
     H = row1.shape[0]
-    b1 = 0.0
-    b2 = 0.0
+    b1 = ti.Vector([0.0] * n, dt=ti.f32)
+    b2 = ti.Vector([0.0] * n, dt=ti.f32)
     for d in ti.static(range(-R, R + 1)):
         ii = border_index(i + d, H, mode)
         wgt = border_weight(i + d, H, mode)
-        b1 += g1[d + R] * wgt * row1[ii, j]
-        b2 += g2[d + R] * wgt * row2[ii, j]
+        b1 += (g1[d + R] * wgt) * run_load(row1, ii, j, n)
+        b2 += (g2[d + R] * wgt) * run_load(row2, ii, j, n)
     return A * b1 - B * b2
 
 

@@ -7,13 +7,15 @@ grouping); F-LGMD adds its fixed-point iteration. Every pass reads values stored
 by the pass before it, so nothing is computed twice per pixel.
 Sums are accumulated in float64. Borders replicate (index clamping), as in
 the authors' C# code. Loops run over (row, column-block) work items
-(:func:`cdnf_ti.kernels.common.block_span`).
+(:func:`cdnf_ti.kernels.common.block_span`); each item visits its columns in runs
+(:func:`cdnf_ti.kernels.common.row_runs`), so the per-pixel equations below are
+written once, on vectors of ``n`` consecutive columns.
 
 The NumPy float64 oracle of every stage is :mod:`cdnf_ti.baselines_reference`.
 """
 
 from ..taichi_runtime import dsl
-from .common import block_span, fill  # noqa: F401 - fill is part of this module's kernel set
+from .common import block_span, fill, row_runs, run_load, run_max, run_store, run_sum  # noqa: F401 - fill is part of this module's kernel set
 
 ti = dsl()  # taichi or quadrants: the same DSL
 
@@ -22,36 +24,35 @@ VEC2D = ti.types.vector(2, ti.f64)
 
 
 @ti.func
-def _clamp(i, n):
-    return ti.min(ti.max(i, 0), n - 1)
-
-
-@ti.func
-def _edge_diag(x: ti.template(), i, j, H, W):
-    """Sums of the 4 edge and 4 diagonal neighbours of (i, j), replicate border."""
-    im = _clamp(i - 1, H)
-    ip = _clamp(i + 1, H)
-    jm = _clamp(j - 1, W)
-    jp = _clamp(j + 1, W)
-    e = x[im, j] + x[ip, j] + x[i, jm] + x[i, jp]
-    d = x[im, jm] + x[im, jp] + x[ip, jm] + x[ip, jp]
+def _edge_diag(x: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
+    """Sums of the 4 edge and 4 diagonal neighbours of the run ``(i, j .. j + n - 1)``."""
+    e = run_load(x, im, j, n) + run_load(x, ip, j, n) + run_load(x, i, jm, n) + run_load(x, i, jp, n)
+    d = run_load(x, im, jm, n) + run_load(x, im, jp, n) + run_load(x, ip, jm, n) + run_load(x, ip, jp, n)
     return e, d
 
 
 @ti.func
-def _delayed(x: ti.template(), xp: ti.template(), i, j, H, W, k0, k1, k2, a0, a1, a2):
+def _stencil(x: ti.template(), im, i, ip, jm, j, jp, n: ti.template(), w0, w1, w2):
+    """Symmetric 3x3 correlation (centre w0, edge w1, diagonal w2) on a run."""
+    e, d = _edge_diag(x, im, i, ip, jm, j, jp, n)
+    return w0 * run_load(x, i, j, n) + w1 * e + w2 * d
+
+
+@ti.func
+def _delayed(x: ti.template(), xp: ti.template(), im, i, ip, jm, j, jp, n: ti.template(), k0, k1, k2, a0, a1, a2):
     """``sum K [a X(t) + (1 - a) X(t-1)]`` over the 3x3 window (centre k0/a0, edge k1/a1, diagonal k2/a2)."""
-    e, d = _edge_diag(x, i, j, H, W)
-    ep, dp = _edge_diag(xp, i, j, H, W)
-    c = a0 * x[i, j] + (1.0 - a0) * xp[i, j]
+    e, d = _edge_diag(x, im, i, ip, jm, j, jp, n)
+    ep, dp = _edge_diag(xp, im, i, ip, jm, j, jp, n)
+    c = a0 * run_load(x, i, j, n) + (1.0 - a0) * run_load(xp, i, j, n)
     return k0 * c + k1 * (a1 * e + (1.0 - a1) * ep) + k2 * (a2 * d + (1.0 - a2) * dp)
 
 
 @ti.func
-def _box(x: ti.template(), i, j, H, W):
-    """Mean of the 3x3 window (the grouping kernel, 1/9 ones)."""
-    e, d = _edge_diag(x, i, j, H, W)
-    return (x[i, j] + e + d) * (1.0 / 9.0)
+def _group_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
+    S, G = ti.static(ctx[0], ctx[1])
+    g = _stencil(S, im, i, ip, jm, j, jp, n, 1.0 / 9.0, 1.0 / 9.0, 1.0 / 9.0)
+    run_store(G, i, j, g, n)
+    return run_sum(g, n)
 
 
 @ti.func
@@ -62,19 +63,21 @@ def _group(S: ti.template(), G: ti.template(), blocks):
     total = ti.f64(0.0)
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        acc = ti.f64(0.0)
-        for j in range(j0, j1):
-            g = _box(S, i, j, H, W)
-            G[i, j] = g
-            acc += ti.cast(g, ti.f64)
-        ti.atomic_add(total, acc)
+        ti.atomic_add(total, row_runs(_group_run, (S, G), i, j0, j1, H, W, "sum", 1))
     return total
 
 
 @ti.func
-def _gauss3(x: ti.template(), i, j, H, W, g0, g1, g2):
-    e, d = _edge_diag(x, i, j, H, W)
-    return g0 * x[i, j] + g1 * e + g2 * d
+def _load_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
+    frame, L, P, on, off, on_p, off_p = ti.static(ctx[0], ctx[1], ctx[2], ctx[3], ctx[4], ctx[5], ctx[6])
+    scale, keep, clip, dc = ctx[7], ctx[8], ctx[9], ctx[10]
+    g = ti.floor(run_load(frame, i, j, n) * scale + 0.5)
+    p = keep * (g - run_load(L, i, j, n))
+    run_store(L, i, j, g, n)
+    run_store(P, i, j, p, n)
+    run_store(on, i, j, ti.select(p >= clip, p, 0.0) + dc * run_load(on_p, i, j, n), n)
+    run_store(off, i, j, ti.select(p < clip, ti.abs(p), 0.0) + dc * run_load(off_p, i, j, n), n)
+    return run_sum(ti.abs(p), n)
 
 
 @ti.kernel
@@ -93,20 +96,45 @@ def load_frame(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, on: F2, off: F2, o
     :func:`cdnf_ti.baselines_reference.eight_bit`, ``half_wave_on``/``half_wave_off``.
     """
     H, W = L.shape[0], L.shape[1]
+    keep = ti.select(first != 0, 0.0, 1.0)
     total = ti.f64(0.0)
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        acc = ti.f64(0.0)
-        for j in range(j0, j1):
-            g = ti.floor(ti.cast(frame[i, j], ti.f32) * scale + 0.5)
-            p = ti.select(first != 0, 0.0, g - L[i, j])
-            L[i, j] = g
-            P[i, j] = p
-            on[i, j] = ti.select(p >= clip, p, 0.0) + dc * on_p[i, j]
-            off[i, j] = ti.select(p < clip, ti.abs(p), 0.0) + dc * off_p[i, j]
-            acc += ti.cast(ti.abs(p), ti.f64)
-        ti.atomic_add(total, acc)
+        ti.atomic_add(total, row_runs(_load_run, (frame, L, P, on, off, on_p, off_p, scale, keep, clip, dc),
+                                      i, j0, j1, H, W, "sum", 1))
     return total
+
+
+@ti.func
+def _lgmd2_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
+    on, off, on_p, off_p, I_on, I_off, S = ti.static(ctx[0], ctx[1], ctx[2], ctx[3], ctx[4], ctx[5], ctx[6])
+    kn, an, kf, af, w_on, w_off, e = ctx[7], ctx[8], ctx[9], ctx[10], ctx[11], ctx[12], ctx[13]
+    i_on = _delayed(on, on_p, im, i, ip, jm, j, jp, n, kn[0], kn[1], kn[2], an[0], an[1], an[2])
+    i_off = _delayed(off, off_p, im, i, ip, jm, j, jp, n, kf[0], kf[1], kf[2], af[0], af[1], af[2])
+    run_store(I_on, i, j, i_on, n)
+    run_store(I_off, i, j, i_off, n)
+    s_on = ti.max(run_load(on, i, j, n) - w_on * i_on, 0.0)
+    s_off = ti.max(run_load(off, i, j, n) - w_off * i_off, 0.0)
+    run_store(S, i, j, e[0] * s_on + e[1] * s_off + e[2] * s_on * s_off, n)
+    return 0.0
+
+
+@ti.func
+def _excitation_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
+    S, Ce = ti.static(ctx[0], ctx[1])
+    c = _stencil(S, im, i, ip, jm, j, jp, n, 1.0 / 9.0, 1.0 / 9.0, 1.0 / 9.0)
+    run_store(Ce, i, j, c, n)
+    return run_max(ti.abs(c), n)
+
+
+@ti.func
+def _grouping_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
+    S, Ce, G = ti.static(ctx[0], ctx[1], ctx[2])
+    inv_omega, c_de, t_de = ctx[3], ctx[4], ctx[5]
+    g = run_load(S, i, j, n) * run_load(Ce, i, j, n) * inv_omega
+    g = ti.select(g * c_de >= t_de, g, 0.0)
+    run_store(G, i, j, g, n)
+    return run_sum(g, n)
 
 
 @ti.kernel
@@ -126,37 +154,40 @@ def lgmd2_layers(
     ``G = S Ce / (delta_c + max|Ce| / c_w)``, zero unless ``c_de G >= t_de``.
     """
     H, W = on.shape[0], on.shape[1]
+    kn = ti.Vector([kn0, kn1, kn2])
+    an = ti.Vector([an0, an1, an2])
+    kf = ti.Vector([kf0, kf1, kf2])
+    af = ti.Vector([af0, af1, af2])
+    e = ti.Vector([e_on, e_off, e_onoff])
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        for j in range(j0, j1):
-            i_on = _delayed(on, on_p, i, j, H, W, kn0, kn1, kn2, an0, an1, an2)
-            i_off = _delayed(off, off_p, i, j, H, W, kf0, kf1, kf2, af0, af1, af2)
-            I_on[i, j] = i_on
-            I_off[i, j] = i_off
-            s_on = ti.max(on[i, j] - w_on * i_on, 0.0)
-            s_off = ti.max(off[i, j] - w_off * i_off, 0.0)
-            S[i, j] = e_on * s_on + e_off * s_off + e_onoff * s_on * s_off
+        row_runs(_lgmd2_run, (on, off, on_p, off_p, I_on, I_off, S, kn, an, kf, af, w_on, w_off, e),
+                 i, j0, j1, H, W, "sum", 1)
     mx = 0.0
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        m = 0.0
-        for j in range(j0, j1):
-            c = _box(S, i, j, H, W)
-            Ce[i, j] = c
-            m = ti.max(m, ti.abs(c))
-        ti.atomic_max(mx, m)
+        ti.atomic_max(mx, ti.cast(row_runs(_excitation_run, (S, Ce), i, j0, j1, H, W, "max", 1), ti.f32))
     total = ti.f64(0.0)
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
         inv_omega = 1.0 / (delta_c + mx / c_w)
-        acc = ti.f64(0.0)
-        for j in range(j0, j1):
-            g = S[i, j] * Ce[i, j] * inv_omega
-            g = ti.select(g * c_de >= t_de, g, 0.0)
-            G[i, j] = g
-            acc += ti.cast(g, ti.f64)
-        ti.atomic_add(total, acc)
+        ti.atomic_add(total, row_runs(_grouping_run, (S, Ce, G, inv_omega, c_de, t_de), i, j0, j1, H, W, "sum", 1))
     return ti.Vector([total, ti.cast(mx, ti.f64)])
+
+
+@ti.func
+def _lgmd1_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
+    on, off, on_p, off_p, I_on, E_off, S = ti.static(ctx[0], ctx[1], ctx[2], ctx[3], ctx[4], ctx[5], ctx[6])
+    k, a, w_i_on, w_i_off, e, t_s = ctx[7], ctx[8], ctx[9], ctx[10], ctx[11], ctx[12]
+    i_on = _delayed(on, on_p, im, i, ip, jm, j, jp, n, 0.0, k[0], k[1], 0.0, a[0], a[1])
+    e_o = _delayed(off, off_p, im, i, ip, jm, j, jp, n, 0.0, k[0], k[1], 0.0, a[0], a[1])
+    run_store(I_on, i, j, i_on, n)
+    run_store(E_off, i, j, e_o, n)
+    s_on = run_load(on, i, j, n) - w_i_on * i_on
+    s_off = e_o - w_i_off * run_load(off, i, j, n)
+    s = e[0] * s_on + e[1] * s_off + e[2] * s_on * s_off
+    run_store(S, i, j, ti.select(s >= t_s, s, 0.0), n)
+    return 0.0
 
 
 @ti.kernel
@@ -173,17 +204,13 @@ def lgmd1_layers(
     ``G = S (*) ones/9``.
     """
     H, W = on.shape[0], on.shape[1]
+    kk = ti.Vector([k1, k2])
+    a = ti.Vector([a1, a2])
+    e = ti.Vector([e_on, e_off, e_onoff])
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        for j in range(j0, j1):
-            i_on = _delayed(on, on_p, i, j, H, W, 0.0, k1, k2, 0.0, a1, a2)
-            e_o = _delayed(off, off_p, i, j, H, W, 0.0, k1, k2, 0.0, a1, a2)
-            I_on[i, j] = i_on
-            E_off[i, j] = e_o
-            s_on = on[i, j] - w_i_on * i_on
-            s_off = e_o - w_i_off * off[i, j]
-            s = e_on * s_on + e_off * s_off + e_onoff * s_on * s_off
-            S[i, j] = ti.select(s >= t_s, s, 0.0)
+        row_runs(_lgmd1_run, (on, off, on_p, off_p, I_on, E_off, S, kk, a, w_i_on, w_i_off, e, t_s),
+                 i, j0, j1, H, W, "sum", 1)
     return _group(S, G, blocks)
 
 
@@ -195,9 +222,21 @@ def lgmd1_layers(
 
 
 @ti.func
-def _flgmd_local(x: ti.template(), q: ti.template(), i, j, H, W, w0, w1, w2):
-    """``S_X = [W_x (*) X - Q]+`` at (i, j)."""
-    return ti.max(_gauss3(x, i, j, H, W, w0, w1, w2) - q[i, j], 0.0)
+def _flgmd_local(x: ti.template(), q: ti.template(), im, i, ip, jm, j, jp, n: ti.template(), w):
+    """``S_X = [W_x (*) X - Q]+`` on a run (``w``: centre, edge, diagonal of ``W_x``)."""
+    return ti.max(_stencil(x, im, i, ip, jm, j, jp, n, w[0], w[1], w[2]) - run_load(q, i, j, n), 0.0)
+
+
+@ti.func
+def _prepare_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
+    on0, off0, on, off, on_p, off_p, q_on, q_off = ti.static(ctx[0], ctx[1], ctx[2], ctx[3], ctx[4], ctx[5],
+                                                             ctx[6], ctx[7])
+    c_on, c_off = ctx[8], ctx[9]  # (edge, diagonal) weights w_i K (1 - a) of each channel
+    run_store(q_on, i, j, _stencil(on_p, im, i, ip, jm, j, jp, n, 0.0, c_on[0], c_on[1]), n)
+    run_store(q_off, i, j, _stencil(off_p, im, i, ip, jm, j, jp, n, 0.0, c_off[0], c_off[1]), n)
+    run_store(on, i, j, run_load(on0, i, j, n), n)
+    run_store(off, i, j, run_load(off0, i, j, n), n)
+    return 0.0
 
 
 @ti.kernel
@@ -208,15 +247,27 @@ def flgmd_prepare(on0: F2, off0: F2, on: F2, off: F2, on_p: F2, off_p: F2, q_on:
     (``on_p``/``off_p``: the settled previous channels); the iterate ``on``/``off``
     starts at the drives ``on0``/``off0`` (:func:`load_frame`)."""
     H, W = on0.shape[0], on0.shape[1]
+    c = ti.Vector([k1 * (1.0 - a1), k2 * (1.0 - a2)])
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        for j in range(j0, j1):
-            e_on, d_on = _edge_diag(on_p, i, j, H, W)
-            e_off, d_off = _edge_diag(off_p, i, j, H, W)
-            q_on[i, j] = w_i_on * (k1 * (1.0 - a1) * e_on + k2 * (1.0 - a2) * d_on)
-            q_off[i, j] = w_i_off * (k1 * (1.0 - a1) * e_off + k2 * (1.0 - a2) * d_off)
-            on[i, j] = on0[i, j]
-            off[i, j] = off0[i, j]
+        row_runs(_prepare_run, (on0, off0, on, off, on_p, off_p, q_on, q_off, w_i_on * c, w_i_off * c),
+                 i, j0, j1, H, W, "sum", 1)
+
+
+@ti.func
+def _relax_run(x0: ti.template(), x: ti.template(), q: ti.template(), x_n: ti.template(), im, i, ip, jm, j, jp,
+               n: ti.template(), w, beta, lam, mom):
+    """One update of a channel on a run; returns ``max |T(X) - X|`` there."""
+    xc = run_load(x, i, j, n)
+    d = ti.max(run_load(x0, i, j, n) + beta * _flgmd_local(x, q, im, i, ip, jm, j, jp, n, w), 0.0) - xc
+    run_store(x_n, i, j, xc + mom * (xc - run_load(x_n, i, j, n)) + lam * d, n)
+    return run_max(ti.abs(d), n)
+
+
+@ti.func
+def _iterate_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
+    on0, on, q_on, on_n = ti.static(ctx[0], ctx[1], ctx[2], ctx[3])
+    return _relax_run(on0, on, q_on, on_n, im, i, ip, jm, j, jp, n, ctx[4], ctx[5], ctx[6], ctx[7])
 
 
 @ti.kernel
@@ -230,32 +281,36 @@ def flgmd_iterate(
     ``on_n``/``off_n`` hold the iterate before ``X`` on entry (used when ``mom != 0``:
     a Chebyshev step; ``mom = 0``: plain relaxation).
     ``wn``/``wf``: ``(centre, edge, diagonal)`` of ``W_x`` for the ON/OFF channel
-    (:meth:`cdnf_ti.models.flgmd.FLGMDParams.feedback_stencil`). Returns
+    (:meth:`cdnf_ti.models.flgmd.FLGMDParams.feedback_stencils`). Returns
     ``(max|T(ON) - ON|, max|T(OFF) - OFF|)``. With ``with_off`` False
     (``beta_off == 0``) the OFF channel equals its drive and is not iterated.
     """
     H, W = on.shape[0], on.shape[1]
+    wn = ti.Vector([wn0, wn1, wn2])
+    wf = ti.Vector([wf0, wf1, wf2])
     r_on = 0.0
     r_off = 0.0
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        m_on = 0.0
-        m_off = 0.0
-        for j in range(j0, j1):
-            s_on = _flgmd_local(on, q_on, i, j, H, W, wn0, wn1, wn2)
-            d_on = ti.max(on0[i, j] + beta_on * s_on, 0.0) - on[i, j]
-            x = on[i, j]
-            on_n[i, j] = x + mom * (x - on_n[i, j]) + lam * d_on
-            m_on = ti.max(m_on, ti.abs(d_on))
-            if ti.static(with_off):
-                s_off = _flgmd_local(off, q_off, i, j, H, W, wf0, wf1, wf2)
-                d_off = ti.max(off0[i, j] + beta_off * s_off, 0.0) - off[i, j]
-                y = off[i, j]
-                off_n[i, j] = y + mom * (y - off_n[i, j]) + lam * d_off
-                m_off = ti.max(m_off, ti.abs(d_off))
-        ti.atomic_max(r_on, m_on)
-        ti.atomic_max(r_off, m_off)
+        ti.atomic_max(r_on, ti.cast(row_runs(_iterate_run, (on0, on, q_on, on_n, wn, beta_on, lam, mom),
+                                             i, j0, j1, H, W, "max", 1), ti.f32))
+        if ti.static(with_off):
+            ti.atomic_max(r_off, ti.cast(row_runs(_iterate_run, (off0, off, q_off, off_n, wf, beta_off, lam, mom),
+                                                  i, j0, j1, H, W, "max", 1), ti.f32))
     return ti.Vector([r_on, r_off])
+
+
+@ti.func
+def _finish_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
+    on, off, q_on, q_off, S_on, S_off, S = ti.static(ctx[0], ctx[1], ctx[2], ctx[3], ctx[4], ctx[5], ctx[6])
+    wn, wf, t_s = ctx[7], ctx[8], ctx[9]
+    a = _flgmd_local(on, q_on, im, i, ip, jm, j, jp, n, wn)
+    b = _flgmd_local(off, q_off, im, i, ip, jm, j, jp, n, wf)
+    run_store(S_on, i, j, a, n)
+    run_store(S_off, i, j, b, n)
+    s = a + b
+    run_store(S, i, j, ti.select(s >= t_s, s, 0.0), n)
+    return 0.0
 
 
 @ti.kernel
@@ -267,13 +322,9 @@ def flgmd_finish(
     """Local summation at the fixed point, ``S = S_on + S_off`` kept where ``>= t_s``,
     ``G = S (*) ones/9``; returns ``sum G``."""
     H, W = on.shape[0], on.shape[1]
+    wn = ti.Vector([wn0, wn1, wn2])
+    wf = ti.Vector([wf0, wf1, wf2])
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        for j in range(j0, j1):
-            a = _flgmd_local(on, q_on, i, j, H, W, wn0, wn1, wn2)
-            b = _flgmd_local(off, q_off, i, j, H, W, wf0, wf1, wf2)
-            S_on[i, j] = a
-            S_off[i, j] = b
-            s = a + b
-            S[i, j] = ti.select(s >= t_s, s, 0.0)
+        row_runs(_finish_run, (on, off, q_on, q_off, S_on, S_off, S, wn, wf, t_s), i, j0, j1, H, W, "sum", 1)
     return _group(S, G, blocks)

@@ -9,12 +9,36 @@ as separable row/column passes with a replicate border. NumPy float64 oracle:
 """
 
 from ..taichi_runtime import dsl
-from .common import REPLICATE, block_span, dog_column_sum, dog_row_pass, fill, luminance_change, tanh_rational  # noqa: F401
+from .common import (  # noqa: F401 - fill is part of this module's kernel set
+    REPLICATE,
+    block_span,
+    dog_column_run,
+    dog_row_pass,
+    fill,
+    row_runs,
+    run_load,
+    run_store,
+    run_sum,
+    tanh_rational,
+)
 
 ti = dsl()  # taichi or quadrants: the same DSL
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
+
+
+@ti.func
+def _load_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
+    frame, L, P, E = ti.static(ctx[0], ctx[1], ctx[2], ctx[3])
+    scale, keep, t_b = ctx[4], ctx[5], ctx[6]
+    g = run_load(frame, i, j, n) * scale
+    p = keep * (g - run_load(L, i, j, n))
+    run_store(L, i, j, g, n)
+    run_store(P, i, j, p, n)
+    e = ti.select(ti.abs(p) >= t_b, 1.0, 0.0)
+    run_store(E, i, j, e, n)
+    return run_sum(e, n)
 
 
 @ti.kernel
@@ -23,17 +47,11 @@ def load_binary(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, E: F2, scale: ti.
     """``g = frame * scale`` in [0, 1]; ``P = g - L`` (0 when ``first``); ``E = [|P| >= t_b]``;
     returns ``sum E``."""
     H, W = L.shape[0], L.shape[1]
+    keep = ti.select(first != 0, 0.0, 1.0)
     total = ti.f64(0.0)
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        acc = ti.f64(0.0)
-        for j in range(j0, j1):
-            p = luminance_change(frame, L, i, j, scale, first)
-            P[i, j] = p
-            e = ti.select(ti.abs(p) >= t_b, 1.0, 0.0)
-            E[i, j] = e
-            acc += ti.cast(e, ti.f64)
-        ti.atomic_add(total, acc)
+        ti.atomic_add(total, row_runs(_load_run, (frame, L, P, E, scale, keep, t_b), i, j0, j1, H, W, "sum", 1))
     return total
 
 
@@ -41,6 +59,19 @@ def load_binary(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, E: F2, scale: ti.
 def _act(u, theta_scale):
     """Firing rate ``f(u) = theta([u]+) = tanh([u]+) / tanh(1)``."""
     return tanh_rational(ti.max(u, 0.0)) * theta_scale
+
+
+@ti.func
+def _update_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
+    E, row1, row2, u_new, F_new, g1, g2 = ti.static(ctx[0], ctx[1], ctx[2], ctx[3], ctx[4], ctx[5], ctx[6])
+    A, B_t, h, theta_scale = ctx[7], ctx[8], ctx[9], ctx[10]
+    R = ti.static(ctx[11])
+    lateral = dog_column_run(row1, row2, g1, g2, A, B_t, i, j, n, REPLICATE, R)
+    v = run_load(E, i, j, n) - h + tanh_rational(0.5 * lateral)
+    run_store(u_new, i, j, v, n)
+    f = _act(v, theta_scale)
+    run_store(F_new, i, j, f, n)
+    return run_sum(f, n)
 
 
 @ti.kernel
@@ -59,12 +90,6 @@ def field_update(
     total = ti.f64(0.0)
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        acc = ti.f64(0.0)
-        for j in range(j0, j1):
-            v = E[i, j] - h + tanh_rational(0.5 * dog_column_sum(row1, row2, g1, g2, A, B_t, i, j, REPLICATE, R))
-            u_new[i, j] = v
-            f = _act(v, theta_scale)
-            F_new[i, j] = f
-            acc += ti.cast(f, ti.f64)
-        ti.atomic_add(total, acc)
+        ti.atomic_add(total, row_runs(_update_run, (E, row1, row2, u_new, F_new, g1, g2, A, B_t, h, theta_scale, R),
+                                      i, j0, j1, H, W, "sum", 1))
     return total
