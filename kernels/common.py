@@ -71,7 +71,7 @@ def block_span(k, width, blocks):
     """Row and column range [j0, j1) of work item ``k`` (row-major items)."""
     i = k // blocks
     b = k % blocks
-    bw = (width + blocks - 1) // blocks
+    bw = ((width + blocks - 1) // blocks + CHUNK - 1) // CHUNK * CHUNK  # whole runs (row_runs)
     j0 = ti.min(b * bw, width)
     j1 = ti.min(j0 + bw, width)
     return i, j0, j1
@@ -86,6 +86,7 @@ def block_span(k, width, blocks):
 # the replicate border) and for the last columns of a segment.
 
 CHUNK = 16
+QUARTER = 4  # the shorter runs that finish a segment
 
 
 @ti.func
@@ -129,8 +130,9 @@ def row_runs(body: ti.template(), ctx: ti.template(), i, j0, j1, H, W, reduce: t
 
     ``im``/``ip`` are the rows above and below, ``jm``/``jp`` the first columns of the
     left and right neighbours of the run ``j .. j + n - 1`` (clamped: replicate border).
-    Runs of ``n = CHUNK`` columns keep ``halo`` columns either side inside the frame
-    (``halo`` >= 1: the body's horizontal reach); every other column is a run of one.
+    Runs of ``n = CHUNK`` (then ``QUARTER``) columns keep ``halo`` columns either side
+    inside the frame (``halo`` >= 1: the body's horizontal reach); every other column is
+    a run of one.
     Returns the ``reduce`` (``"sum"``: float64 sum; ``"max"``) of body's returns.
     """
     im = ti.min(ti.max(i - 1, 0), H - 1)
@@ -154,6 +156,13 @@ def row_runs(body: ti.template(), ctx: ti.template(), i, j0, j1, H, W, reduce: t
         else:
             acc += r
         j += CHUNK
+    while j + QUARTER <= end:
+        r = body(ctx, im, i, ip, j - 1, j, j + 1, QUARTER)
+        if ti.static(reduce == "max"):
+            acc = ti.max(acc, r)
+        else:
+            acc += r
+        j += QUARTER
     while j < j1:
         r = body(ctx, im, i, ip, j - 1, j, ti.min(j + 1, W - 1), 1)
         if ti.static(reduce == "max"):
