@@ -57,11 +57,21 @@ def field_update(inp, lateral, u, prev, h, lam, mom):
     return u + mom * (u - prev) + lam * d, d
 
 
+@ti.func
+def _load_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
+    frame, L, P = ti.static(ctx[0], ctx[1], ctx[2])
+    luminance_change(frame, L, P, i, j, n, ctx[3], ctx[4], False)
+    return 0.0
+
+
 @ti.kernel
-def load_frame(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, scale: ti.f32, first: ti.i32):
+def load_frame(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, scale: ti.f32, first: ti.i32, blocks: ti.i32):
     """``g = frame * scale``; ``P = g - L`` (0 when ``first``); ``L = g``."""
-    for i, j in L:
-        P[i, j] = luminance_change(frame, L, i, j, scale, first)
+    H, W = L.shape[0], L.shape[1]
+    keep = ti.select(first != 0, 0.0, 1.0)
+    for k in range(H * blocks):
+        i, j0, j1 = block_span(k, W, blocks)
+        row_runs(_load_run, (frame, L, P, scale, keep), i, j0, j1, H, W, "sum", 1)
 
 
 @ti.kernel
@@ -367,6 +377,12 @@ def _wait(sync: ti.template(), phase, H):
 
 
 @ti.func
+def _worker_start():
+    """A worker's ``(go, ran, best)`` before its first update: go on, none run, no residual yet."""
+    return 1, 0, ti.f32(3.0e38)
+
+
+@ti.func
 def _go_on(r, best, tol, grow):
     """Whether to run the next update after one with residual ``r``; the new best residual.
 
@@ -609,9 +625,7 @@ def lanes_contrast_solve(
     for slot in range(nw * WORKER_STRIDE):
         if slot % WORKER_STRIDE == 0:
             w = slot // WORKER_STRIDE
-            go = 1
-            ran = 0
-            best = ti.f32(3.0e38)
+            go, ran, best = _worker_start()
             if load != 0:
                 while True:
                     i0, i1 = _claim(sync, LOAD_PHASE, w, nw, H)
@@ -705,9 +719,7 @@ def lanes_summation_kernel(g1: tuple, g2: tuple):
         for slot in range(nw * WORKER_STRIDE):
             if slot % WORKER_STRIDE == 0:
                 w = slot // WORKER_STRIDE
-                go = 1
-                ran = 0
-                best = ti.f32(3.0e38)
+                go, ran, best = _worker_start()
                 for j in range(n):
                     go, best = _gate(sync, rbuf, go, best, j, 2 * j - 1, H, tol, grow)
                     if go != 0:

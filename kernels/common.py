@@ -11,8 +11,8 @@ BORDER_CODES = {"replicate": REPLICATE, "reflect": REFLECT, "zero": ZERO}
 
 # Taichi 1.7 hands each CPU thread chunks of the outer loop; a 240-row frame
 # would run on one thread if we looped over rows only. Loop over
-# (row, column-block) items instead; each item runs a serial, vectorisable
-# inner loop over its columns.
+# (row, column-block) items instead; each item visits its columns in runs
+# (row_runs, below).
 COLUMN_BLOCKS = 4
 
 
@@ -58,15 +58,6 @@ def border_weight(i, n, mode: ti.template()):
 
 
 @ti.func
-def luminance_change(frame: ti.template(), L: ti.template(), i, j, scale, first):
-    """``P = frame * scale - L`` at (i, j) (0 on the first frame); stores the new ``L``."""
-    g = ti.cast(frame[i, j], ti.f32) * scale
-    p = ti.select(first != 0, 0.0, g - L[i, j])
-    L[i, j] = g
-    return p
-
-
-@ti.func
 def block_span(k, width, blocks):
     """Row and column range [j0, j1) of work item ``k`` (row-major items)."""
     i = k // blocks
@@ -103,6 +94,21 @@ def run_store(x: ti.template(), i, j, v, n: ti.template()):
     """``x[i, j .. j + n - 1] = v``."""
     for c in ti.static(range(n)):
         x[i, j + c] = v[c]
+
+
+@ti.func
+def luminance_change(frame: ti.template(), L: ti.template(), P: ti.template(), i, j, n: ti.template(), scale, keep,
+                     grey_levels: ti.template()):
+    """Photoreceptors on the run ``(i, j .. j + n - 1)``: ``g = frame * scale`` (rounded to
+    integer grey levels when ``grey_levels``), ``P = keep (g - L)`` (``keep = 0`` on the
+    first frame), ``L = g``. Returns ``P``."""
+    g = run_load(frame, i, j, n) * scale
+    if ti.static(grey_levels):
+        g = ti.floor(g + 0.5)
+    p = keep * (g - run_load(L, i, j, n))
+    run_store(L, i, j, g, n)
+    run_store(P, i, j, p, n)
+    return p
 
 
 @ti.func
@@ -197,7 +203,7 @@ def dog_row_pass(v: ti.template(), row1: ti.template(), row2: ti.template(), g1:
     H, W = v.shape[0], v.shape[1]
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        row_runs(_dog_row_run, (v, row1, row2, g1, g2, mode, R), i, j0, j1, H, W, "sum", ti.max(R, 1))
+        row_runs(_dog_row_run, (v, row1, row2, g1, g2, mode, R), i, j0, j1, H, W, "sum", ti.static(max(R, 1)))
 
 
 @ti.func

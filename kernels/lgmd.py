@@ -15,7 +15,7 @@ The NumPy float64 oracle of every stage is :mod:`cdnf_ti.baselines_reference`.
 """
 
 from ..taichi_runtime import dsl
-from .common import block_span, fill, row_runs, run_load, run_max, run_store, run_sum  # noqa: F401 - fill is part of this module's kernel set
+from .common import block_span, fill, luminance_change, row_runs, run_load, run_max, run_store, run_sum  # noqa: F401 - fill is part of this module's kernel set
 
 ti = dsl()  # taichi or quadrants: the same DSL
 
@@ -71,10 +71,7 @@ def _group(S: ti.template(), G: ti.template(), blocks):
 def _load_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
     frame, L, P, on, off, on_p, off_p = ti.static(ctx[0], ctx[1], ctx[2], ctx[3], ctx[4], ctx[5], ctx[6])
     scale, keep, clip, dc = ctx[7], ctx[8], ctx[9], ctx[10]
-    g = ti.floor(run_load(frame, i, j, n) * scale + 0.5)
-    p = keep * (g - run_load(L, i, j, n))
-    run_store(L, i, j, g, n)
-    run_store(P, i, j, p, n)
+    p = luminance_change(frame, L, P, i, j, n, scale, keep, True)
     run_store(on, i, j, ti.select(p >= clip, p, 0.0) + dc * run_load(on_p, i, j, n), n)
     run_store(off, i, j, ti.select(p < clip, ti.abs(p), 0.0) + dc * run_load(off_p, i, j, n), n)
     return run_sum(ti.abs(p), n)

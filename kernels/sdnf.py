@@ -15,6 +15,7 @@ from .common import (  # noqa: F401 - fill is part of this module's kernel set
     dog_column_run,
     dog_row_pass,
     fill,
+    luminance_change,
     row_runs,
     run_load,
     run_store,
@@ -32,10 +33,7 @@ F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
 def _load_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
     frame, L, P, E = ti.static(ctx[0], ctx[1], ctx[2], ctx[3])
     scale, keep, t_b = ctx[4], ctx[5], ctx[6]
-    g = run_load(frame, i, j, n) * scale
-    p = keep * (g - run_load(L, i, j, n))
-    run_store(L, i, j, g, n)
-    run_store(P, i, j, p, n)
+    p = luminance_change(frame, L, P, i, j, n, scale, keep, False)
     e = ti.select(ti.abs(p) >= t_b, 1.0, 0.0)
     run_store(E, i, j, e, n)
     return run_sum(e, n)

@@ -85,7 +85,7 @@ class TaichiCDNFBackend:
 
     def load(self, grey: np.ndarray, first: bool) -> None:
         scale = 1.0 / 255.0 if grey.dtype == np.uint8 else 1.0
-        self.K.load_frame(grey, self.L, self.P, scale, int(first))
+        self.K.load_frame(grey, self.L, self.P, scale, int(first), self.blocks)
 
     def clear_input(self) -> None:
         self.K.fill(self.P, 0.0)
