@@ -18,21 +18,42 @@ float64 NumPy reference of the same equations is :mod:`cdnf_ti.reference`.
 import functools
 
 from ..taichi_runtime import dsl
-from .common import (  # noqa: F401 - fill is part of this module's kernel set
+from .common import (  # noqa: F401 - fill, lanes_fill, LANES, MAX_STEPS, lane_layout and sync_size are part of this module's interface
+    LANES,
+    LAST_PHASE,
+    LOAD_PHASE,
+    MAX_STEPS,
+    MAX_WORKERS,
     REFLECT,
     REPLICATE,
+    WORKER_STRIDE,
     block_span,
     border_index,
     border_weight,
+    claim_rows,
+    converged,
     dog_column_run,
     dog_row_pass,
     fill,
+    fill_ghosts,
+    finish_rows,
+    gate,
+    lane_layout,
+    lane_mask,
+    lane_neighbours,
+    lane_shift,
+    lanes_fill,
     luminance_change,
+    reset_sync,
+    residuals_out,
     row_runs,
     run_load,
     run_max,
     run_store,
+    sync_size,
     tanh_rational,
+    wait_phase,
+    worker_start,
 )
 
 ti = dsl()  # taichi or quadrants: the same DSL
@@ -42,7 +63,6 @@ F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
 VEC2 = ti.types.vector(2, ti.f32)
 
 
-MAX_STEPS = 16  # updates per launch of the lane kernels (CDNFParams.steps_per_launch <= 16)
 
 
 @ti.func
@@ -189,83 +209,6 @@ def mean_activation(v: F2, theta_scale: ti.f32, blocks: ti.i32) -> ti.f64:
     return total / ti.f64(H * W)
 
 
-# ---------------------------------------------------------------------------
-# Lane-vectorised kernels on padded Vector fields (the fast path).
-#
-# Taichi 1.7 on the CPU does not loop-vectorise: every ndarray/field access in a
-# loop re-loads its base pointer after each store (the stores may alias the
-# argument buffer), so LLVM's loop vectoriser gives up and each pixel costs a
-# few scalar loads. It does SLP-vectorise straight-line code on vector-typed
-# field elements. The fast path therefore stores a field as
-# ``ti.Vector.field(LANES, f32, (H, NB))``: element (i, e) holds the LANES
-# consecutive columns ``(e - 1) * LANES .. e * LANES - 1`` of row i, so column
-# c lives at flat position ``LANES + c``. Element 0 and the elements past the
-# last column hold "ghost" columns: the values the border mode puts outside
-# the frame (replicate/reflect copies, or 0), refreshed by the thread that
-# wrote the row, so the stencils read neighbours without any clamping.
-# Horizontal neighbours are lane shifts of three consecutive elements.
-# ---------------------------------------------------------------------------
-
-LANES = 16
-
-
-def lane_layout(width: int) -> tuple[int, int]:
-    """``(E1, NB)``: last element holding a frame column, elements per row."""
-    e1 = (LANES + width - 1) // LANES
-    return e1, e1 + 2
-
-
-@ti.func
-def _shift(a, b, c, s: ti.template()):
-    """Lanes of ``b`` shifted by ``s`` columns (``a``/``c``: left/right neighbours)."""
-    out = ti.Vector([0.0] * LANES, dt=ti.f32)
-    for l in ti.static(range(LANES)):
-        if ti.static(l + s < 0):
-            out[l] = a[LANES + l + s]
-        elif ti.static(l + s >= LANES):
-            out[l] = c[l + s - LANES]
-        else:
-            out[l] = b[l + s]
-    return out
-
-
-@ti.func
-def _lane_mask(e, W: ti.template()):
-    """1.0 on the lanes of element ``e`` that hold frame columns, else 0.0 (only the last one has any)."""
-    m = ti.Vector([1.0] * LANES, dt=ti.f32)
-    if e == ti.static((LANES + W - 1) // LANES):
-        for l in ti.static(range(LANES)):
-            if ti.static((W - 1) // LANES * LANES + l >= W):
-                m[l] = 0.0
-    return m
-
-
-@ti.func
-def _fill_ghosts(x: ti.template(), p, i, left: ti.i32, right: ti.i32, W: ti.template(), R: ti.template(),
-                 mode: ti.template()):
-    """Write the R ghost columns left of column 0 / right of column W-1 of row ``i`` of buffer ``p``."""
-    if left:
-        for d in ti.static(range(1, R + 1)):
-            g = LANES - d  # flat position of column -d
-            val = ti.f32(0.0)
-            if ti.static(mode == REFLECT):
-                val = x[p, i, (LANES + d) // LANES][(LANES + d) % LANES]
-            elif ti.static(mode == REPLICATE):
-                val = x[p, i, 1][0]
-            x[p, i, g // LANES][g % LANES] = val
-    if right:
-        for d in ti.static(range(1, R + 1)):
-            g = LANES + W - 1 + d
-            val = ti.f32(0.0)
-            if ti.static(mode == REFLECT):
-                s = LANES + W - 1 - d
-                val = x[p, i, s // LANES][s % LANES]
-            elif ti.static(mode == REPLICATE):
-                s = LANES + W - 1
-                val = x[p, i, s // LANES][s % LANES]
-            x[p, i, g // LANES][g % LANES] = val
-
-
 # -- pending spans ---------------------------------------------------------------
 # Each field group (ON+OFF; Summation) keeps, per ping-pong parity and row, the span
 # ``(lo, hi)`` of lane elements where something changed: a field value moved by more
@@ -297,131 +240,6 @@ def lanes_pending_all(pend: ti.template(), W: ti.template()):
     """Every element of every row pending, both parities (after a change made outside the kernels)."""
     for p, i in pend:
         pend[p, i] = ti.Vector([1, (LANES + W - 1) // LANES])
-
-
-# -- persistent workers ------------------------------------------------------------
-# taichi launches a parallel loop through a thread pool whose hand-off costs ~50 us
-# per loop on these machines, and a second pool thread often starts hundreds of us
-# after the first. A solve kernel therefore runs ONE parallel loop of ``nw``
-# persistent workers (one per pool thread) for all its updates: the workers claim
-# chunks of rows of each phase (an update, or a pass of one) from atomic counters and
-# wait for the previous phase to finish before they start the next one. The rows are
-# cut into ``nw`` bands; a worker takes chunks of its own band first (its rows stay in
-# its core's cache from update to update), then helps with the others, so a worker
-# that starts late costs nothing. Rows of a phase are claimed only after every row of
-# the phase before, and a claimed row is worked on by a running worker, so the waits
-# always end: with one pool thread the first worker simply does everything. A CPU pool
-# thread takes a chunk of at least WORKER_STRIDE consecutive loop indices, so the
-# workers sit WORKER_STRIDE indices apart.
-
-WORKER_STRIDE = 512
-MAX_WORKERS = 32
-SYNC_STRIDE = 16  # i32 slots between two counters: one 64-byte cache line each
-ROWS_PER_CLAIM = 2
-MAX_PHASES = 2 * MAX_STEPS + 2  # the updates' phases, one that runs after them, one before
-LAST_PHASE = 2 * MAX_STEPS
-LOAD_PHASE = 2 * MAX_STEPS + 1
-
-
-def sync_size() -> int:
-    """Length of the counter field a solve kernel needs."""
-    return MAX_PHASES * (MAX_WORKERS + 1) * SYNC_STRIDE
-
-
-@ti.func
-def _slot(phase, k):
-    """Counter ``k`` of ``phase``: the claim counter of band ``k < MAX_WORKERS``, else the done counter."""
-    return (phase * (MAX_WORKERS + 1) + k) * SYNC_STRIDE
-
-
-@ti.func
-def _reset_sync(sync: ti.template(), rbuf: ti.template(), nw):
-    """Zero the phase counters, mark every update not run (serial: before the workers start)."""
-    ti.loop_config(serialize=True)
-    for q in range(MAX_PHASES):
-        for k in range(nw):
-            sync[_slot(q, k)] = 0
-        sync[_slot(q, MAX_WORKERS)] = 0
-        if q < MAX_STEPS:
-            rbuf[q, 0] = -1.0  # < 0: update not run
-            rbuf[q, 1] = -1.0
-
-
-@ti.func
-def _claim(sync: ti.template(), phase, w, nw, H):
-    """Rows ``[i0, i1)`` of the next chunk of ``phase`` for worker ``w`` (``i0 >= i1``: none left)."""
-    i0 = H
-    i1 = H
-    for t in range(nw):
-        if i0 >= i1:
-            band = (w + t) % nw
-            top = band * H // nw
-            end = (band + 1) * H // nw
-            x = top + ti.atomic_add(sync[_slot(phase, band)], ROWS_PER_CLAIM)
-            if x < end:
-                i0 = x
-                i1 = ti.min(x + ROWS_PER_CLAIM, end)
-    return i0, i1
-
-
-@ti.func
-def _finish(sync: ti.template(), phase, rows):
-    ti.atomic_add(sync[_slot(phase, MAX_WORKERS)], rows)
-
-
-@ti.func
-def _wait(sync: ti.template(), phase, H):
-    """Spin until every row of ``phase`` is finished."""
-    while ti.atomic_add(sync[_slot(phase, MAX_WORKERS)], 0) < H:
-        pass
-
-
-@ti.func
-def _worker_start():
-    """A worker's ``(go, ran, best)`` before its first update: go on, none run, no residual yet."""
-    return 1, 0, ti.f32(3.0e38)
-
-
-@ti.func
-def _go_on(r, best, tol, grow):
-    """Whether to run the next update after one with residual ``r``; the new best residual.
-
-    Stop once ``r <= tol`` (converged) or ``r > grow * best`` (growing: the solver
-    restarts the recurrence from here).
-    """
-    go = ti.select((r > tol) & (r <= grow * best), 1, 0)
-    return go, ti.min(best, r)
-
-
-@ti.func
-def _gate(sync: ti.template(), rbuf: ti.template(), go, best, j, phase, H, tol, grow):
-    """Before update ``j``: wait until ``phase`` (the last of update ``j - 1``) is finished, then
-    decide whether to run update ``j`` (:func:`_go_on`). Returns ``(go, best)``."""
-    if go != 0 and j > 0:
-        _wait(sync, phase, H)
-        go, best = _go_on(ti.max(rbuf[j - 1, 0], rbuf[j - 1, 1]), best, tol, grow)
-    return go, best
-
-
-@ti.func
-def _converged(sync: ti.template(), rbuf: ti.template(), go, ran, phase, H, tol):
-    """Whether the solve converged in this launch (``ran`` updates run; ``phase``: the last one's).
-
-    A worker that ran every update first waits for the last one to finish.
-    """
-    if go != 0 and ran > 0:
-        _wait(sync, phase, H)
-    last = ti.max(ran - 1, 0)
-    return (ran > 0) & (ti.max(rbuf[last, 0], rbuf[last, 1]) <= tol)
-
-
-@ti.func
-def _results(rbuf: ti.template(), nres: ti.template()):
-    out = ti.Vector([0.0] * (nres * MAX_STEPS), dt=ti.f32)
-    for j in ti.static(range(MAX_STEPS)):
-        for f in ti.static(range(nres)):
-            out[nres * j + f] = rbuf[j, f]
-    return out
 
 
 # -- frame, Summation input, mean activation -------------------------------------------
@@ -461,17 +279,10 @@ def lanes_load_frame(frame: ti.types.ndarray(ndim=2), L: ti.template(), P: ti.te
 
 
 @ti.kernel
-def lanes_fill(x: ti.template(), value: ti.f32):
-    """Every lane of every element (ghosts included) = ``value``."""
-    for I in ti.grouped(x):
-        x[I] = ti.Vector([value] * LANES, dt=ti.f32)
-
-
-@ti.kernel
 def lanes_refresh_ghosts(x: ti.template(), W: ti.template(), mode: ti.template()):
     """Set the ghost columns of every row of both buffers of ``x`` from its frame columns (border mode)."""
     for p, i in ti.ndrange(2, x.shape[1]):
-        _fill_ghosts(x, p, i, 1, 1, W, LANES - 1, mode)
+        fill_ghosts(x, p, i, 1, 1, W, LANES - 1, mode)
 
 
 @ti.func
@@ -517,7 +328,7 @@ def _activation_row(v: ti.template(), s, i, theta_scale, W: ti.template()):
     E1 = (LANES + W - 1) // LANES
     acc = ti.f64(0.0)
     for e in range(1, E1 + 1):
-        a = tanh_rational(ti.max(v[s, i, e], 0.0)) * theta_scale * _lane_mask(e, W)
+        a = tanh_rational(ti.max(v[s, i, e], 0.0)) * theta_scale * lane_mask(e, W)
         acc += ti.cast(a.sum(), ti.f64)
     return acc
 
@@ -539,22 +350,6 @@ def lanes_mean_activation(v: ti.template(), s: ti.i32, theta_scale: ti.f32, W: t
 # -- the contrast solve --------------------------------------------------------------
 
 @ti.func
-def _neighbours(left, b, right):
-    """``(b shifted right by one column, b shifted left by one column)``.
-
-    ``left`` is the column before lane 0 and ``right`` the column after the last lane.
-    """
-    lo = ti.Vector([0.0] * LANES, dt=ti.f32)
-    hi = ti.Vector([0.0] * LANES, dt=ti.f32)
-    lo[0] = left
-    hi[LANES - 1] = right
-    for l in ti.static(range(1, LANES)):
-        lo[l] = b[l - 1]
-        hi[l - 1] = b[l]
-    return lo, hi
-
-
-@ti.func
 def _relax(x: ti.template(), p, q, i, e, inp, lateral, h, lam, mom, tau, W: ti.template(), m, lo, hi):
     """Element ``e`` of row ``i``: buffer ``q`` = the update (:func:`field_update`) of buffer ``p``.
 
@@ -563,7 +358,7 @@ def _relax(x: ti.template(), p, q, i, e, inp, lateral, h, lam, mom, tau, W: ti.t
     """
     xc = x[p, i, e]
     nx, d = field_update(inp, lateral, xc, x[q, i, e], h, lam, mom)
-    ad = ti.abs(d) * _lane_mask(e, W)
+    ad = ti.abs(d) * lane_mask(e, W)
     x[q, i, e] = ti.select(ad > tau, nx, xc)
     moved = ad.max() > tau
     return ti.max(m, ad), ti.select(moved, ti.min(lo, e), lo), ti.select(moved, e, hi)
@@ -590,7 +385,7 @@ def _contrast_row(P: ti.template(), u: ti.template(), p, q, sign: ti.template(),
     c_cur = k0 * u[p, i, e0] + k1 * (wim * u[p, im, e0] + wip * u[p, ip, e0])
     for e in range(e0, e1):
         c_next = k0 * u[p, i, e + 1] + k1 * (wim * u[p, im, e + 1] + wip * u[p, ip, e + 1])
-        left, right = _neighbours(c_left, c_cur, c_next[0])
+        left, right = lane_neighbours(c_left, c_cur, c_next[0])
         s = k0 * c_cur + k1 * (left + right)
         m, lo, hi = _relax(u, p, q, i, e, ti.max(sign * P[i, e], 0.0), s, h, lam, mom, tau, W, m, lo, hi)
         c_left = c_cur[LANES - 1]
@@ -621,22 +416,22 @@ def lanes_contrast_solve(
     """
     H = P.shape[0]
     E1 = (LANES + W - 1) // LANES
-    _reset_sync(sync, rbuf, nw)
+    reset_sync(sync, rbuf, nw)
     for slot in range(nw * WORKER_STRIDE):
         if slot % WORKER_STRIDE == 0:
             w = slot // WORKER_STRIDE
-            go, ran, best = _worker_start()
+            go, ran, best = worker_start()
             if load != 0:
                 while True:
-                    i0, i1 = _claim(sync, LOAD_PHASE, w, nw, H)
+                    i0, i1 = claim_rows(sync, LOAD_PHASE, w, nw, H)
                     if i0 >= i1:
                         break
                     for i in range(i0, i1):
                         _load_row(frame, L, P, scale, first, W, pend, c, i)
-                    _finish(sync, LOAD_PHASE, i1 - i0)
-                _wait(sync, LOAD_PHASE, H)
+                    finish_rows(sync, LOAD_PHASE, i1 - i0)
+                wait_phase(sync, LOAD_PHASE, H)
             for j in range(n):
-                go, best = _gate(sync, rbuf, go, best, j, j - 1, H, tol, grow)
+                go, best = gate(sync, rbuf, go, best, j, j - 1, H, tol, grow)
                 if go != 0:
                     ran = j + 1
                     p = (c + j) % 2
@@ -644,7 +439,7 @@ def lanes_contrast_solve(
                     lam = coef[j, 0]
                     mom = coef[j, 1]
                     while True:
-                        i0, i1 = _claim(sync, j, w, nw, H)
+                        i0, i1 = claim_rows(sync, j, w, nw, H)
                         if i0 >= i1:
                             break
                         m_on = 0.0
@@ -662,8 +457,8 @@ def lanes_contrast_solve(
                                                                    e0, e1, k0, k1, h, lam, mom, tau, W)
                                 r_off, lo_off, hi_off = _contrast_row(P, u_off, p, q, -1.0, i, im, ip, wim, wip,
                                                                       e0, e1, k0, k1, h, lam, mom, tau, W)
-                                _fill_ghosts(u_on, q, i, e0 == 1, e1 == E1 + 1, W, 1, mode)
-                                _fill_ghosts(u_off, q, i, e0 == 1, e1 == E1 + 1, W, 1, mode)
+                                fill_ghosts(u_on, q, i, e0 == 1, e1 == E1 + 1, W, 1, mode)
+                                fill_ghosts(u_off, q, i, e0 == 1, e1 == E1 + 1, W, 1, mode)
                                 m_on = ti.max(m_on, r_on.max())
                                 m_off = ti.max(m_off, r_off.max())
                                 lo = ti.min(lo_on, lo_off)
@@ -671,16 +466,16 @@ def lanes_contrast_solve(
                             pend[q, i] = ti.Vector([lo, hi])
                         ti.atomic_max(rbuf[j, 0], m_on)
                         ti.atomic_max(rbuf[j, 1], m_off)
-                        _finish(sync, j, i1 - i0)
-            if _converged(sync, rbuf, go, ran, ran - 1, H, tol):
+                        finish_rows(sync, j, i1 - i0)
+            if converged(sync, rbuf, go, ran, ran - 1, H, tol):
                 f = (c + ran) % 2  # the buffer holding the result
                 while True:
-                    i0, i1 = _claim(sync, LAST_PHASE, w, nw, H)
+                    i0, i1 = claim_rows(sync, LAST_PHASE, w, nw, H)
                     if i0 >= i1:
                         break
                     for i in range(i0, i1):
                         _summation_input_row(u_on, u_off, f, S, pend_s, i, alpha_on, alpha_off, theta_scale, W)
-    return _results(rbuf, 2)
+    return residuals_out(rbuf, 2)
 
 
 # -- the Summation solve ---------------------------------------------------------------
@@ -713,22 +508,22 @@ def lanes_summation_kernel(g1: tuple, g2: tuple):
         """
         H = S.shape[0]
         E1 = (LANES + W - 1) // LANES
-        _reset_sync(sync, rbuf, nw)
+        reset_sync(sync, rbuf, nw)
         msum[0] = 0.0
         msum[1] = 0.0
         for slot in range(nw * WORKER_STRIDE):
             if slot % WORKER_STRIDE == 0:
                 w = slot // WORKER_STRIDE
-                go, ran, best = _worker_start()
+                go, ran, best = worker_start()
                 for j in range(n):
-                    go, best = _gate(sync, rbuf, go, best, j, 2 * j - 1, H, tol, grow)
+                    go, best = gate(sync, rbuf, go, best, j, 2 * j - 1, H, tol, grow)
                     if go != 0:
                         ran = j + 1
                         p = (c + j) % 2
                         q = 1 - p
                         # phase 2j: horizontal passes wherever a row within R needs a visit
                         while True:
-                            i0, i1 = _claim(sync, 2 * j, w, nw, H)
+                            i0, i1 = claim_rows(sync, 2 * j, w, nw, H)
                             if i0 >= i1:
                                 break
                             for i in range(i0, i1):
@@ -741,20 +536,20 @@ def lanes_summation_kernel(g1: tuple, g2: tuple):
                                         a1 = ti.static(G1[R]) * cc
                                         a2 = ti.static(G2[R]) * cc
                                         for d in ti.static(range(1, R + 1)):
-                                            pair = _shift(a, cc, nx, -d) + _shift(a, cc, nx, d)
+                                            pair = lane_shift(a, cc, nx, -d) + lane_shift(a, cc, nx, d)
                                             a1 += ti.static(G1[R + d]) * pair
                                             a2 += ti.static(G2[R + d]) * pair
                                         row1[i, e] = a1
                                         row2[i, e] = a2
                                         a = cc
                                         cc = nx
-                            _finish(sync, 2 * j, i1 - i0)
-                        _wait(sync, 2 * j, H)
+                            finish_rows(sync, 2 * j, i1 - i0)
+                        wait_phase(sync, 2 * j, H)
                         # phase 2j + 1: vertical passes and the update
                         lam = coef[j, 0]
                         mom = coef[j, 1]
                         while True:
-                            i0, i1 = _claim(sync, 2 * j + 1, w, nw, H)
+                            i0, i1 = claim_rows(sync, 2 * j + 1, w, nw, H)
                             if i0 >= i1:
                                 break
                             mx = 0.0
@@ -776,15 +571,15 @@ def lanes_summation_kernel(g1: tuple, g2: tuple):
                                             b2 += ti.static(G2[R + d]) * (wu * row2[iu, e] + wd * row2[idn, e])
                                         m, lo, hi = _relax(v, p, q, i, e, S[i, e], A * b1 - B * b2, h, lam, mom, tau,
                                                            W, m, lo, hi)
-                                    _fill_ghosts(v, q, i, e0 == 1, e1 == E1 + 1, W, R, mode)
+                                    fill_ghosts(v, q, i, e0 == 1, e1 == E1 + 1, W, R, mode)
                                     mx = ti.max(mx, m.max())
                                 pend[q, i] = ti.Vector([lo, hi])
                             ti.atomic_max(rbuf[j, 0], mx)
-                            _finish(sync, 2 * j + 1, i1 - i0)
-                if _converged(sync, rbuf, go, ran, 2 * ran - 1, H, tol):
+                            finish_rows(sync, 2 * j + 1, i1 - i0)
+                if converged(sync, rbuf, go, ran, 2 * ran - 1, H, tol):
                     f = (c + ran) % 2  # the buffer holding the result
                     while True:
-                        i0, i1 = _claim(sync, LAST_PHASE, w, nw, H)
+                        i0, i1 = claim_rows(sync, LAST_PHASE, w, nw, H)
                         if i0 >= i1:
                             break
                         acc = ti.f64(0.0)

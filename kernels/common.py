@@ -227,3 +227,261 @@ def fill(x: F2, value: ti.f32):
     """Set every element of ``x`` to ``value``."""
     for i, j in x:
         x[i, j] = value
+
+
+# ---------------------------------------------------------------------------
+# Lane-vectorised kernels on padded Vector fields (the fast path).
+#
+# Taichi 1.7 on the CPU does not loop-vectorise: every ndarray/field access in a
+# loop re-loads its base pointer after each store (the stores may alias the
+# argument buffer), so LLVM's loop vectoriser gives up and each pixel costs a
+# few scalar loads. It does SLP-vectorise straight-line code on vector-typed
+# field elements. The fast path therefore stores a field as
+# ``ti.Vector.field(LANES, f32, (H, NB))``: element (i, e) holds the LANES
+# consecutive columns ``(e - 1) * LANES .. e * LANES - 1`` of row i, so column
+# c lives at flat position ``LANES + c``. Element 0 and the elements past the
+# last column hold "ghost" columns: the values the border mode puts outside
+# the frame (replicate/reflect copies, or 0), refreshed by the thread that
+# wrote the row, so the stencils read neighbours without any clamping.
+# Horizontal neighbours are lane shifts of three consecutive elements.
+# ---------------------------------------------------------------------------
+
+LANES = 16
+
+
+def lane_layout(width: int) -> tuple[int, int]:
+    """``(E1, NB)``: last element holding a frame column, elements per row."""
+    e1 = (LANES + width - 1) // LANES
+    return e1, e1 + 2
+
+
+@ti.func
+def lane_shift(a, b, c, s: ti.template()):
+    """Lanes of ``b`` shifted by ``s`` columns (``a``/``c``: left/right neighbours)."""
+    out = ti.Vector([0.0] * LANES, dt=ti.f32)
+    for l in ti.static(range(LANES)):
+        if ti.static(l + s < 0):
+            out[l] = a[LANES + l + s]
+        elif ti.static(l + s >= LANES):
+            out[l] = c[l + s - LANES]
+        else:
+            out[l] = b[l + s]
+    return out
+
+
+@ti.func
+def lane_mask(e, W: ti.template()):
+    """1.0 on the lanes of element ``e`` that hold frame columns, else 0.0 (only the last one has any)."""
+    m = ti.Vector([1.0] * LANES, dt=ti.f32)
+    if e == ti.static((LANES + W - 1) // LANES):
+        for l in ti.static(range(LANES)):
+            if ti.static((W - 1) // LANES * LANES + l >= W):
+                m[l] = 0.0
+    return m
+
+
+@ti.func
+def lane_get(x: ti.template(), p, i, e):
+    """Element ``(i, e)`` of buffer ``p`` of a lane field: ``x[p, i, e]``, or ``x[i, e]`` for a field of one buffer."""
+    if ti.static(len(x.shape) == 3):
+        return x[p, i, e]
+    else:
+        return x[i, e]
+
+
+@ti.func
+def _lane_put(x: ti.template(), p, i, e, lane: ti.template(), val):
+    """Set one lane of element ``(i, e)`` of buffer ``p`` (see :func:`lane_get`)."""
+    if ti.static(len(x.shape) == 3):
+        x[p, i, e][lane] = val
+    else:
+        x[i, e][lane] = val
+
+
+@ti.func
+def fill_ghosts(x: ti.template(), p, i, left: ti.i32, right: ti.i32, W: ti.template(), R: ti.template(),
+                mode: ti.template()):
+    """Write the R ghost columns left of column 0 / right of column W-1 of row ``i`` of buffer ``p``
+    (``p`` is ignored for a field of one buffer, see :func:`lane_get`)."""
+    if left:
+        for d in ti.static(range(1, R + 1)):
+            g = LANES - d  # flat position of column -d
+            val = ti.f32(0.0)
+            if ti.static(mode == REFLECT):
+                val = lane_get(x, p, i, (LANES + d) // LANES)[(LANES + d) % LANES]
+            elif ti.static(mode == REPLICATE):
+                val = lane_get(x, p, i, 1)[0]
+            _lane_put(x, p, i, g // LANES, g % LANES, val)
+    if right:
+        for d in ti.static(range(1, R + 1)):
+            g = LANES + W - 1 + d
+            val = ti.f32(0.0)
+            if ti.static(mode == REFLECT):
+                s = LANES + W - 1 - d
+                val = lane_get(x, p, i, s // LANES)[s % LANES]
+            elif ti.static(mode == REPLICATE):
+                s = LANES + W - 1
+                val = lane_get(x, p, i, s // LANES)[s % LANES]
+            _lane_put(x, p, i, g // LANES, g % LANES, val)
+
+
+@ti.func
+def lane_edge_diag(x: ti.template(), p, im, i, ip, e):
+    """``(centre, edge sum, diagonal sum)`` of the 3x3 windows of the LANES columns of element
+    ``(i, e)`` of buffer ``p`` (``im``/``ip``: the rows above and below; ghosts give the border)."""
+    c = lane_get(x, p, i, e)
+    v = lane_get(x, p, im, e) + lane_get(x, p, ip, e)
+    c_lo, c_hi = lane_neighbours(lane_get(x, p, i, e - 1)[LANES - 1], c, lane_get(x, p, i, e + 1)[0])
+    v_lo, v_hi = lane_neighbours(lane_get(x, p, im, e - 1)[LANES - 1] + lane_get(x, p, ip, e - 1)[LANES - 1], v,
+                                 lane_get(x, p, im, e + 1)[0] + lane_get(x, p, ip, e + 1)[0])
+    return c, v + c_lo + c_hi, v_lo + v_hi
+
+
+@ti.func
+def lane_neighbours(left, b, right):
+    """``(b shifted right by one column, b shifted left by one column)``.
+
+    ``left`` is the column before lane 0 and ``right`` the column after the last lane.
+    """
+    lo = ti.Vector([0.0] * LANES, dt=ti.f32)
+    hi = ti.Vector([0.0] * LANES, dt=ti.f32)
+    lo[0] = left
+    hi[LANES - 1] = right
+    for l in ti.static(range(1, LANES)):
+        lo[l] = b[l - 1]
+        hi[l - 1] = b[l]
+    return lo, hi
+
+
+@ti.kernel
+def lanes_fill(x: ti.template(), value: ti.f32):
+    """Every lane of every element (ghosts included) = ``value``."""
+    for I in ti.grouped(x):
+        x[I] = ti.Vector([value] * LANES, dt=ti.f32)
+
+
+MAX_STEPS = 16  # updates per launch of the persistent-worker kernels (steps_per_launch <= 16)
+
+# -- persistent workers ------------------------------------------------------------
+# taichi launches a parallel loop through a thread pool whose hand-off costs ~50 us
+# per loop on these machines, and a second pool thread often starts hundreds of us
+# after the first. A solve kernel therefore runs ONE parallel loop of ``nw``
+# persistent workers (one per pool thread) for all its updates: the workers claim
+# chunks of rows of each phase (an update, or a pass of one) from atomic counters and
+# wait for the previous phase to finish before they start the next one. The rows are
+# cut into ``nw`` bands; a worker takes chunks of its own band first (its rows stay in
+# its core's cache from update to update), then helps with the others, so a worker
+# that starts late costs nothing. Rows of a phase are claimed only after every row of
+# the phase before, and a claimed row is worked on by a running worker, so the waits
+# always end: with one pool thread the first worker simply does everything. A CPU pool
+# thread takes a chunk of at least WORKER_STRIDE consecutive loop indices, so the
+# workers sit WORKER_STRIDE indices apart.
+
+WORKER_STRIDE = 512
+MAX_WORKERS = 32
+SYNC_STRIDE = 16  # i32 slots between two counters: one 64-byte cache line each
+ROWS_PER_CLAIM = 2
+MAX_PHASES = 2 * MAX_STEPS + 2  # the updates' phases, one that runs after them, one before
+LAST_PHASE = 2 * MAX_STEPS
+LOAD_PHASE = 2 * MAX_STEPS + 1
+
+
+def sync_size() -> int:
+    """Length of the counter field a solve kernel needs."""
+    return MAX_PHASES * (MAX_WORKERS + 1) * SYNC_STRIDE
+
+
+@ti.func
+def _slot(phase, k):
+    """Counter ``k`` of ``phase``: the claim counter of band ``k < MAX_WORKERS``, else the done counter."""
+    return (phase * (MAX_WORKERS + 1) + k) * SYNC_STRIDE
+
+
+@ti.func
+def reset_sync(sync: ti.template(), rbuf: ti.template(), nw):
+    """Zero the phase counters, mark every update not run (serial: before the workers start)."""
+    ti.loop_config(serialize=True)
+    for q in range(MAX_PHASES):
+        for k in range(nw):
+            sync[_slot(q, k)] = 0
+        sync[_slot(q, MAX_WORKERS)] = 0
+        if q < MAX_STEPS:
+            rbuf[q, 0] = -1.0  # < 0: update not run
+            rbuf[q, 1] = -1.0
+
+
+@ti.func
+def claim_rows(sync: ti.template(), phase, w, nw, H):
+    """Rows ``[i0, i1)`` of the next chunk of ``phase`` for worker ``w`` (``i0 >= i1``: none left)."""
+    i0 = H
+    i1 = H
+    for t in range(nw):
+        if i0 >= i1:
+            band = (w + t) % nw
+            top = band * H // nw
+            end = (band + 1) * H // nw
+            x = top + ti.atomic_add(sync[_slot(phase, band)], ROWS_PER_CLAIM)
+            if x < end:
+                i0 = x
+                i1 = ti.min(x + ROWS_PER_CLAIM, end)
+    return i0, i1
+
+
+@ti.func
+def finish_rows(sync: ti.template(), phase, rows):
+    ti.atomic_add(sync[_slot(phase, MAX_WORKERS)], rows)
+
+
+@ti.func
+def wait_phase(sync: ti.template(), phase, H):
+    """Spin until every row of ``phase`` is finished."""
+    while ti.atomic_add(sync[_slot(phase, MAX_WORKERS)], 0) < H:
+        pass
+
+
+@ti.func
+def worker_start():
+    """A worker's ``(go, ran, best)`` before its first update: go on, none run, no residual yet."""
+    return 1, 0, ti.f32(3.0e38)
+
+
+@ti.func
+def go_on(r, best, tol, grow):
+    """Whether to run the next update after one with residual ``r``; the new best residual.
+
+    Stop once ``r <= tol`` (converged) or ``r > grow * best`` (growing: the solver
+    restarts the recurrence from here).
+    """
+    go = ti.select((r > tol) & (r <= grow * best), 1, 0)
+    return go, ti.min(best, r)
+
+
+@ti.func
+def gate(sync: ti.template(), rbuf: ti.template(), go, best, j, phase, H, tol, grow):
+    """Before update ``j``: wait until ``phase`` (the last of update ``j - 1``) is finished, then
+    decide whether to run update ``j`` (:func:`_go_on`). Returns ``(go, best)``."""
+    if go != 0 and j > 0:
+        wait_phase(sync, phase, H)
+        go, best = go_on(ti.max(rbuf[j - 1, 0], rbuf[j - 1, 1]), best, tol, grow)
+    return go, best
+
+
+@ti.func
+def converged(sync: ti.template(), rbuf: ti.template(), go, ran, phase, H, tol):
+    """Whether the solve converged in this launch (``ran`` updates run; ``phase``: the last one's).
+
+    A worker that ran every update first waits for the last one to finish.
+    """
+    if go != 0 and ran > 0:
+        wait_phase(sync, phase, H)
+    last = ti.max(ran - 1, 0)
+    return (ran > 0) & (ti.max(rbuf[last, 0], rbuf[last, 1]) <= tol)
+
+
+@ti.func
+def residuals_out(rbuf: ti.template(), nres: ti.template()):
+    out = ti.Vector([0.0] * (nres * MAX_STEPS), dt=ti.f32)
+    for j in ti.static(range(MAX_STEPS)):
+        for f in ti.static(range(nres)):
+            out[nres * j + f] = rbuf[j, f]
+    return out

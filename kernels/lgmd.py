@@ -15,12 +15,53 @@ The NumPy float64 oracle of every stage is :mod:`cdnf_ti.baselines_reference`.
 """
 
 from ..taichi_runtime import dsl
-from .common import block_span, fill, luminance_change, row_runs, run_load, run_max, run_store, run_sum  # noqa: F401 - fill is part of this module's kernel set
+
+# fill, lanes_fill, LANES, MAX_STEPS, MAX_WORKERS and sync_size are part of this module's interface
+from .common import (  # noqa: F401
+    LANES,
+    MAX_STEPS,
+    MAX_WORKERS,
+    REPLICATE,
+    WORKER_STRIDE,
+    block_span,
+    claim_rows,
+    converged,
+    fill,
+    fill_ghosts,
+    finish_rows,
+    gate,
+    lane_edge_diag,
+    lane_mask,
+    lanes_fill,
+    luminance_change,
+    reset_sync,
+    row_runs,
+    run_load,
+    run_max,
+    run_store,
+    run_sum,
+    sync_size,
+    wait_phase,
+    worker_start,
+)
 
 ti = dsl()  # taichi or quadrants: the same DSL
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 VEC2D = ti.types.vector(2, ti.f64)
+
+
+@ti.func
+def half_wave(p, on_prev, off_prev, clip, dc):
+    """ON/OFF channels with residue (scalars or vectors):
+    ``ON = P [P >= clip] + dc ON(t-1)``, ``OFF = |P| [P < clip] + dc OFF(t-1)``."""
+    return ti.select(p >= clip, p, 0.0) + dc * on_prev, ti.select(p < clip, ti.abs(p), 0.0) + dc * off_prev
+
+
+@ti.func
+def _symmetric(c, e, d, w0, w1, w2):
+    """A symmetric 3x3 correlation from the centre ``c`` and the edge/diagonal neighbour sums ``e``/``d``."""
+    return w0 * c + w1 * e + w2 * d
 
 
 @ti.func
@@ -35,7 +76,7 @@ def _edge_diag(x: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
 def _stencil(x: ti.template(), im, i, ip, jm, j, jp, n: ti.template(), w0, w1, w2):
     """Symmetric 3x3 correlation (centre w0, edge w1, diagonal w2) on a run."""
     e, d = _edge_diag(x, im, i, ip, jm, j, jp, n)
-    return w0 * run_load(x, i, j, n) + w1 * e + w2 * d
+    return _symmetric(run_load(x, i, j, n), e, d, w0, w1, w2)
 
 
 @ti.func
@@ -43,8 +84,30 @@ def _delayed(x: ti.template(), xp: ti.template(), im, i, ip, jm, j, jp, n: ti.te
     """``sum K [a X(t) + (1 - a) X(t-1)]`` over the 3x3 window (centre k0/a0, edge k1/a1, diagonal k2/a2)."""
     e, d = _edge_diag(x, im, i, ip, jm, j, jp, n)
     ep, dp = _edge_diag(xp, im, i, ip, jm, j, jp, n)
-    c = a0 * run_load(x, i, j, n) + (1.0 - a0) * run_load(xp, i, j, n)
-    return k0 * c + k1 * (a1 * e + (1.0 - a1) * ep) + k2 * (a2 * d + (1.0 - a2) * dp)
+    return delayed_mix(run_load(x, i, j, n), e, d, run_load(xp, i, j, n), ep, dp, k0, k1, k2, a0, a1, a2)
+
+
+@ti.func
+def delayed_mix(c, e, d, cp, ep, dp, k0, k1, k2, a0, a1, a2):
+    """``sum K [a X(t) + (1 - a) X(t-1)]`` from the centre and edge/diagonal sums of ``X(t)``
+    (``c, e, d``) and of ``X(t-1)`` (``cp, ep, dp``)."""
+    return (k0 * (a0 * c + (1.0 - a0) * cp) + k1 * (a1 * e + (1.0 - a1) * ep)
+            + k2 * (a2 * d + (1.0 - a2) * dp))
+
+
+@ti.func
+def lgmd2_summation(on, off, i_on, i_off, w_on, w_off, e):
+    """LGMD2's ``S = e_on S_on + e_off S_off + e_onoff S_on S_off``, ``S_on = [ON - w_on I_on]+``."""
+    s_on = ti.max(on - w_on * i_on, 0.0)
+    s_off = ti.max(off - w_off * i_off, 0.0)
+    return e[0] * s_on + e[1] * s_off + e[2] * s_on * s_off
+
+
+@ti.func
+def lgmd2_grouping(s, ce, inv_omega, c_de, t_de):
+    """LGMD2's ``G = S Ce / omega``, zero unless ``c_de G >= t_de``."""
+    g = s * ce * inv_omega
+    return ti.select(g * c_de >= t_de, g, 0.0)
 
 
 @ti.func
@@ -72,8 +135,9 @@ def _load_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
     frame, L, P, on, off, on_p, off_p = ti.static(ctx[0], ctx[1], ctx[2], ctx[3], ctx[4], ctx[5], ctx[6])
     scale, keep, clip, dc = ctx[7], ctx[8], ctx[9], ctx[10]
     p = luminance_change(frame, L, P, i, j, n, scale, keep, True)
-    run_store(on, i, j, ti.select(p >= clip, p, 0.0) + dc * run_load(on_p, i, j, n), n)
-    run_store(off, i, j, ti.select(p < clip, ti.abs(p), 0.0) + dc * run_load(off_p, i, j, n), n)
+    a, b = half_wave(p, run_load(on_p, i, j, n), run_load(off_p, i, j, n), clip, dc)
+    run_store(on, i, j, a, n)
+    run_store(off, i, j, b, n)
     return run_sum(ti.abs(p), n)
 
 
@@ -110,9 +174,8 @@ def _lgmd2_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
     i_off = _delayed(off, off_p, im, i, ip, jm, j, jp, n, kf[0], kf[1], kf[2], af[0], af[1], af[2])
     run_store(I_on, i, j, i_on, n)
     run_store(I_off, i, j, i_off, n)
-    s_on = ti.max(run_load(on, i, j, n) - w_on * i_on, 0.0)
-    s_off = ti.max(run_load(off, i, j, n) - w_off * i_off, 0.0)
-    run_store(S, i, j, e[0] * s_on + e[1] * s_off + e[2] * s_on * s_off, n)
+    run_store(S, i, j, lgmd2_summation(run_load(on, i, j, n), run_load(off, i, j, n), i_on, i_off, w_on, w_off, e),
+              n)
     return 0.0
 
 
@@ -128,8 +191,7 @@ def _excitation_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
 def _grouping_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
     S, Ce, G = ti.static(ctx[0], ctx[1], ctx[2])
     inv_omega, c_de, t_de = ctx[3], ctx[4], ctx[5]
-    g = run_load(S, i, j, n) * run_load(Ce, i, j, n) * inv_omega
-    g = ti.select(g * c_de >= t_de, g, 0.0)
+    g = lgmd2_grouping(run_load(S, i, j, n), run_load(Ce, i, j, n), inv_omega, c_de, t_de)
     run_store(G, i, j, g, n)
     return run_sum(g, n)
 
@@ -219,9 +281,32 @@ def lgmd1_layers(
 
 
 @ti.func
+def feedback_local(c, e, d, w, q):
+    """``S_X = [W_x (*) X - Q]+`` from the centre ``c`` and the edge/diagonal sums ``e``/``d`` of ``X``
+    (``w``: centre, edge, diagonal of ``W_x``)."""
+    return ti.max(_symmetric(c, e, d, w[0], w[1], w[2]) - q, 0.0)
+
+
+@ti.func
+def feedback_update(x0, x, local, before, beta, lam, mom):
+    """One update of a channel: ``(X + mom (X - X_before) + lam (T(X) - X), T(X) - X)`` with
+    ``T(X) = [X0 + beta S_X(X)]+`` (``local`` = ``S_X(X)``, :func:`feedback_local`)."""
+    d = ti.max(x0 + beta * local, 0.0) - x
+    return x + mom * (x - before) + lam * d, d
+
+
+@ti.func
+def summed_layer(s_on, s_off, t_s):
+    """``S = S_on + S_off`` kept where ``>= t_s``."""
+    s = s_on + s_off
+    return ti.select(s >= t_s, s, 0.0)
+
+
+@ti.func
 def _flgmd_local(x: ti.template(), q: ti.template(), im, i, ip, jm, j, jp, n: ti.template(), w):
     """``S_X = [W_x (*) X - Q]+`` on a run (``w``: centre, edge, diagonal of ``W_x``)."""
-    return ti.max(_stencil(x, im, i, ip, jm, j, jp, n, w[0], w[1], w[2]) - run_load(q, i, j, n), 0.0)
+    e, d = _edge_diag(x, im, i, ip, jm, j, jp, n)
+    return feedback_local(run_load(x, i, j, n), e, d, w, run_load(q, i, j, n))
 
 
 @ti.func
@@ -255,9 +340,10 @@ def flgmd_prepare(on0: F2, off0: F2, on: F2, off: F2, on_p: F2, off_p: F2, q_on:
 def _relax_run(x0: ti.template(), x: ti.template(), q: ti.template(), x_n: ti.template(), im, i, ip, jm, j, jp,
                n: ti.template(), w, beta, lam, mom):
     """One update of a channel on a run; returns ``max |T(X) - X|`` there."""
-    xc = run_load(x, i, j, n)
-    d = ti.max(run_load(x0, i, j, n) + beta * _flgmd_local(x, q, im, i, ip, jm, j, jp, n, w), 0.0) - xc
-    run_store(x_n, i, j, xc + mom * (xc - run_load(x_n, i, j, n)) + lam * d, n)
+    local = _flgmd_local(x, q, im, i, ip, jm, j, jp, n, w)
+    new, d = feedback_update(run_load(x0, i, j, n), run_load(x, i, j, n), local, run_load(x_n, i, j, n),
+                             beta, lam, mom)
+    run_store(x_n, i, j, new, n)
     return run_max(ti.abs(d), n)
 
 
@@ -305,8 +391,7 @@ def _finish_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
     b = _flgmd_local(off, q_off, im, i, ip, jm, j, jp, n, wf)
     run_store(S_on, i, j, a, n)
     run_store(S_off, i, j, b, n)
-    s = a + b
-    run_store(S, i, j, ti.select(s >= t_s, s, 0.0), n)
+    run_store(S, i, j, summed_layer(a, b, t_s), n)
     return 0.0
 
 
@@ -325,3 +410,350 @@ def flgmd_finish(
         i, j0, j1 = block_span(k, W, blocks)
         row_runs(_finish_run, (on, off, q_on, q_off, S_on, S_off, S, wn, wf, t_s), i, j0, j1, H, W, "sum", 1)
     return _group(S, G, blocks)
+
+
+# -- F-LGMD on lane fields (the fast CPU path) ------------------------------------------
+# The same equations (half_wave, feedback_local, feedback_update, summed_layer) on
+# lane-vectorised Vector fields with ghost columns (see kernels/common.py): element
+# (i, e) holds the LANES columns (e - 1) * LANES .. e * LANES - 1 of row i, elements
+# 1..E1 hold the frame, the replicate border sits in the ghost columns -1 and W.
+# The channels have three buffers (leading index): the settled channel of the last
+# frame and two ping-pong buffers of the iteration. Work items are (row, element
+# block) pairs, so both CPU threads get work on 240-row frames.
+
+
+@ti.func
+def _lane_span(k, E1, blocks):
+    """Row ``i`` and elements ``[e0, e1)`` of work item ``k`` (row-major, ``blocks`` items per row)."""
+    i = k // blocks
+    b = k % blocks
+    bw = (E1 + blocks - 1) // blocks
+    return i, 1 + ti.min(b * bw, E1), 1 + ti.min(b * bw + bw, E1)
+
+
+@ti.func
+def _lane_grey(frame: ti.template(), i, e, scale, W: ti.template()):
+    """8-bit grey levels ``floor(frame * scale + 0.5)`` of element ``(i, e)`` (columns past W-1 repeat it)."""
+    g = ti.Vector([0.0] * LANES, dt=ti.f32)
+    for l in ti.static(range(LANES)):
+        g[l] = ti.cast(frame[i, ti.min((e - 1) * LANES + l, W - 1)], ti.f32)
+    return ti.floor(g * scale + 0.5)
+
+
+@ti.kernel
+def lanes_load_frame(
+    frame: ti.types.ndarray(ndim=2), L: ti.template(), P: ti.template(), on: ti.template(), off: ti.template(),
+    c_on: ti.i32, s_on: ti.i32, c_off: ti.i32, s_off: ti.i32, scale: ti.f32, first: ti.i32, clip: ti.f32,
+    dc: ti.f32, W: ti.template(), blocks: ti.i32, feedback: ti.template(), on0: ti.template(),
+    off0: ti.template(), q_on: ti.template(), q_off: ti.template(), qn1: ti.f32, qn2: ti.f32, qf1: ti.f32,
+    qf2: ti.f32,
+) -> ti.f64:
+    """:func:`load_frame` on lane fields: photoreceptors ``L``/``P`` and the ON/OFF channels,
+    ``on[s_on] = P [P >= clip] + dc on[c_on]`` (same for OFF); returns ``sum |P|``.
+
+    With ``feedback`` (F-LGMD) it also does :func:`flgmd_prepare`: the drives
+    ``on0``/``off0`` (= the iterate's start ``on[s_on]``/``off[s_off]``) and
+    ``Q = w_i sum K (1 - a) X(t-1)`` of the settled channels ``on[c_on]``/``off[c_off]``
+    (``qn``/``qf``: edge and diagonal weights of ON and OFF); otherwise those
+    arguments are not used.
+    """
+    H = L.shape[0]
+    E1 = ti.static((LANES + W - 1) // LANES)
+    keep = ti.select(first != 0, 0.0, 1.0)
+    total = ti.f64(0.0)
+    for k in range(H * blocks):
+        i, e0, e1 = _lane_span(k, E1, blocks)
+        im = ti.max(i - 1, 0)
+        ip = ti.min(i + 1, H - 1)
+        acc = ti.f64(0.0)
+        for e in range(e0, e1):
+            g = _lane_grey(frame, i, e, scale, W)
+            p = keep * (g - L[i, e])
+            L[i, e] = g
+            P[i, e] = p
+            a, b = half_wave(p, on[c_on, i, e], off[c_off, i, e], clip, dc)
+            on[s_on, i, e] = a
+            off[s_off, i, e] = b
+            if ti.static(feedback):
+                on0[i, e] = a
+                off0[i, e] = b
+                cn, en, dn = lane_edge_diag(on, c_on, im, i, ip, e)
+                q_on[i, e] = _symmetric(cn, en, dn, 0.0, qn1, qn2)
+                cf, ef, df = lane_edge_diag(off, c_off, im, i, ip, e)
+                q_off[i, e] = _symmetric(cf, ef, df, 0.0, qf1, qf2)
+            acc += ti.cast((ti.abs(p) * lane_mask(e, W)).sum(), ti.f64)
+        fill_ghosts(on, s_on, i, e0 == 1, e1 == E1 + 1, W, 1, REPLICATE)
+        fill_ghosts(off, s_off, i, e0 == 1, e1 == E1 + 1, W, 1, REPLICATE)
+        ti.atomic_add(total, acc)
+    return total
+
+
+@ti.func
+def _lane_relax(x0: ti.template(), x: ti.template(), q: ti.template(), p, n, im, i, ip, e, w, beta, lam, mom,
+                W: ti.template()):
+    """Element ``(i, e)``: buffer ``n`` of ``x`` = the update (:func:`feedback_update`) of buffer ``p``;
+    returns ``|T(X) - X|`` on its frame columns."""
+    c, ed, dg = lane_edge_diag(x, p, im, i, ip, e)
+    new, d = feedback_update(x0[i, e], c, feedback_local(c, ed, dg, w, q[i, e]), x[n, i, e], beta, lam, mom)
+    x[n, i, e] = new
+    return ti.abs(d) * lane_mask(e, W)
+
+
+# -- F-LGMD: a whole solve in one launch ----------------------------------------------
+# The updates of a frame run in one launch by persistent workers (see "persistent
+# workers" in kernels/common.py): update j is phase j; when the launch converges the
+# workers go on to the layers at the fixed point (phase MAX_STEPS: S_on, S_off, S;
+# phase MAX_STEPS + 1: G and sum G), so a converged frame costs two launches in all
+# (flgmd_lanes_load and this one).
+
+FINISH_PHASE = MAX_STEPS
+GROUP_PHASE = MAX_STEPS + 1
+
+
+@ti.func
+def _lane_update_row(x0: ti.template(), x: ti.template(), q: ti.template(), p, n, i, H, w, beta, lam, mom,
+                     W: ti.template()):
+    """Row ``i`` of one channel update (buffer ``p`` into ``n``, :func:`_lane_relax`).
+
+    Returns the row's ``max |T(X) - X|``."""
+    E1 = ti.static((LANES + W - 1) // LANES)
+    im = ti.max(i - 1, 0)
+    ip = ti.min(i + 1, H - 1)
+    m = ti.Vector([0.0] * LANES, dt=ti.f32)
+    for e in range(1, E1 + 1):
+        m = ti.max(m, _lane_relax(x0, x, q, p, n, im, i, ip, e, w, beta, lam, mom, W))
+    fill_ghosts(x, n, i, 1, 1, W, 1, REPLICATE)
+    return m.max()
+
+
+@ti.func
+def _lane_finish_row(on: ti.template(), off: ti.template(), f_on, f_off, q_on: ti.template(), q_off: ti.template(),
+                     S_on: ti.template(), S_off: ti.template(), S: ti.template(), i, H, wn, wf, t_s, W: ti.template()):
+    """Row ``i`` of ``S_on``, ``S_off`` and ``S`` at the fixed point (channels: buffers ``f_on``/``f_off``)."""
+    E1 = ti.static((LANES + W - 1) // LANES)
+    im = ti.max(i - 1, 0)
+    ip = ti.min(i + 1, H - 1)
+    for e in range(1, E1 + 1):
+        cn, en, dn = lane_edge_diag(on, f_on, im, i, ip, e)
+        a = feedback_local(cn, en, dn, wn, q_on[i, e])
+        cf, ef, df = lane_edge_diag(off, f_off, im, i, ip, e)
+        b = feedback_local(cf, ef, df, wf, q_off[i, e])
+        S_on[i, e] = a
+        S_off[i, e] = b
+        S[i, e] = summed_layer(a, b, t_s)
+    fill_ghosts(S, 0, i, 1, 1, W, 1, REPLICATE)
+
+
+@ti.func
+def _lane_box_row(S: ti.template(), out: ti.template(), i, H, W: ti.template(), reduce: ti.template()):
+    """Row ``i`` of ``out = S (*) ones/9`` (LGMD grouping, LGMD2's ``Ce``).
+
+    Returns the row's float64 sum over the frame columns (``reduce == "sum"``) or its
+    ``max |out|`` there (``"max"``).
+    """
+    E1 = ti.static((LANES + W - 1) // LANES)
+    im = ti.max(i - 1, 0)
+    ip = ti.min(i + 1, H - 1)
+    acc = ti.f64(0.0)
+    for e in range(1, E1 + 1):
+        cs, es, ds = lane_edge_diag(S, 0, im, i, ip, e)
+        b = _symmetric(cs, es, ds, 1.0 / 9.0, 1.0 / 9.0, 1.0 / 9.0)
+        out[i, e] = b
+        v = b * lane_mask(e, W)
+        if ti.static(reduce == "max"):
+            acc = ti.max(acc, ti.cast(ti.abs(v).max(), ti.f64))
+        else:
+            acc += ti.cast(v.sum(), ti.f64)
+    return acc
+
+
+@ti.kernel
+def flgmd_lanes_solve(
+    on0: ti.template(), off0: ti.template(), on: ti.template(), off: ti.template(), q_on: ti.template(),
+    q_off: ti.template(), S_on: ti.template(), S_off: ti.template(), S: ti.template(), G: ti.template(),
+    p_on: ti.i32, n_on: ti.i32, p_off: ti.i32, n_off: ti.i32,
+    wn0: ti.f32, wn1: ti.f32, wn2: ti.f32, wf0: ti.f32, wf1: ti.f32, wf2: ti.f32,
+    beta_on: ti.f32, beta_off: ti.f32, t_s: ti.f32, coef: ti.types.ndarray(dtype=ti.f32, ndim=2), n: ti.i32,
+    tol: ti.f32, grow: ti.f32, nw: ti.i32, sync: ti.template(), rbuf: ti.template(), msum: ti.template(),
+    W: ti.template(), with_off: ti.template(),
+) -> ti.types.vector(2 * MAX_STEPS + 1, ti.f64):
+    """Up to ``n`` feedback updates (:func:`flgmd_lanes_iterate`) in one launch, then the layers.
+
+    Update ``j`` uses ``lam = coef[j, 0]``, ``mom = coef[j, 1]`` and reads buffers
+    ``p`` (``j`` even) or ``n`` (``j`` odd) of each channel, writing the other one; OFF is
+    iterated only ``with_off``. The updates stop after the first one whose residuals are
+    both ``<= tol``, or one whose worst residual exceeds ``grow`` times the best of the
+    launch. When the launch converged, the workers compute ``S_on``, ``S_off``, ``S`` and
+    ``G`` of the result (as :func:`flgmd_lanes_finish`). Returns ``(on_0, off_0, on_1,
+    off_1, ...)``, the residuals of each update (-1: not run), then ``sum G`` (-1 when
+    the launch did not converge).
+    """
+    H = on0.shape[0]
+    wn = ti.Vector([wn0, wn1, wn2])
+    wf = ti.Vector([wf0, wf1, wf2])
+    reset_sync(sync, rbuf, nw)
+    msum[0] = 0.0
+    msum[1] = 0.0
+    for slot in range(nw * WORKER_STRIDE):
+        if slot % WORKER_STRIDE == 0:
+            w = slot // WORKER_STRIDE
+            go, ran, best = worker_start()
+            for j in range(n):
+                go, best = gate(sync, rbuf, go, best, j, j - 1, H, tol, grow)
+                if go != 0:
+                    ran = j + 1
+                    lam = coef[j, 0]
+                    mom = coef[j, 1]
+                    src_on = ti.select(j % 2 == 0, p_on, n_on)
+                    dst_on = p_on + n_on - src_on
+                    src_off = ti.select(j % 2 == 0, p_off, n_off)
+                    dst_off = p_off + n_off - src_off
+                    while True:
+                        i0, i1 = claim_rows(sync, j, w, nw, H)
+                        if i0 >= i1:
+                            break
+                        m_on = 0.0
+                        m_off = 0.0
+                        for i in range(i0, i1):
+                            m_on = ti.max(m_on, _lane_update_row(on0, on, q_on, src_on, dst_on, i, H, wn, beta_on,
+                                                                 lam, mom, W))
+                            if ti.static(with_off):
+                                m_off = ti.max(m_off, _lane_update_row(off0, off, q_off, src_off, dst_off, i, H, wf,
+                                                                       beta_off, lam, mom, W))
+                        ti.atomic_max(rbuf[j, 0], m_on)
+                        ti.atomic_max(rbuf[j, 1], m_off)
+                        finish_rows(sync, j, i1 - i0)
+            if converged(sync, rbuf, go, ran, ran - 1, H, tol):
+                f_on = ti.select(ran % 2 == 0, p_on, n_on)  # the buffers holding the result
+                f_off = p_off
+                if ti.static(with_off):
+                    f_off = ti.select(ran % 2 == 0, p_off, n_off)
+                while True:
+                    i0, i1 = claim_rows(sync, FINISH_PHASE, w, nw, H)
+                    if i0 >= i1:
+                        break
+                    for i in range(i0, i1):
+                        _lane_finish_row(on, off, f_on, f_off, q_on, q_off, S_on, S_off, S, i, H, wn, wf, t_s, W)
+                    finish_rows(sync, FINISH_PHASE, i1 - i0)
+                wait_phase(sync, FINISH_PHASE, H)
+                while True:
+                    i0, i1 = claim_rows(sync, GROUP_PHASE, w, nw, H)
+                    if i0 >= i1:
+                        break
+                    acc = ti.f64(0.0)
+                    for i in range(i0, i1):
+                        acc += _lane_box_row(S, G, i, H, W, "sum")
+                    ti.atomic_add(msum[0], acc)
+                    finish_rows(sync, GROUP_PHASE, i1 - i0)
+                msum[1] = 1.0
+    out = ti.Vector([0.0] * (2 * MAX_STEPS + 1), dt=ti.f64)
+    for j in ti.static(range(MAX_STEPS)):
+        out[2 * j] = ti.cast(rbuf[j, 0], ti.f64)
+        out[2 * j + 1] = ti.cast(rbuf[j, 1], ti.f64)
+    out[2 * MAX_STEPS] = -1.0
+    if msum[1] > 0.0:  # the layers were computed (the workers have all finished here)
+        out[2 * MAX_STEPS] = msum[0]
+    return out
+
+
+@ti.kernel
+def flgmd_lanes_finish(
+    on: ti.template(), off: ti.template(), f_on: ti.i32, f_off: ti.i32, q_on: ti.template(), q_off: ti.template(),
+    S_on: ti.template(), S_off: ti.template(), S: ti.template(), G: ti.template(),
+    wn0: ti.f32, wn1: ti.f32, wn2: ti.f32, wf0: ti.f32, wf1: ti.f32, wf2: ti.f32, t_s: ti.f32, W: ti.template(),
+) -> ti.f64:
+    """:func:`flgmd_finish` on lane fields (channels: buffers ``f_on``/``f_off``); returns ``sum G``.
+
+    For a frame whose solve launch did not converge (:func:`flgmd_lanes_solve` computes
+    the layers itself when it does).
+    """
+    H = S.shape[0]
+    wn = ti.Vector([wn0, wn1, wn2])
+    wf = ti.Vector([wf0, wf1, wf2])
+    for i in range(H):
+        _lane_finish_row(on, off, f_on, f_off, q_on, q_off, S_on, S_off, S, i, H, wn, wf, t_s, W)
+    total = ti.f64(0.0)
+    for i in range(H):
+        total += _lane_box_row(S, G, i, H, W, "sum")
+    return total
+
+
+# -- LGMD2 on lane fields: the layers of a frame in one launch ---------------------------
+# Phase 0: delayed inhibitions and S; phase 1: Ce and max |Ce|; phase 2: G and sum G.
+
+
+@ti.func
+def _lane_lgmd2_row(on: ti.template(), off: ti.template(), c, q, I_on: ti.template(), I_off: ti.template(),
+                    S: ti.template(), i, H, kn, an, kf, af, w_on, w_off, e3, W: ti.template()):
+    """Row ``i`` of ``I_on``, ``I_off`` and ``S`` (channels: buffer ``c`` now, ``q`` the frame before)."""
+    E1 = ti.static((LANES + W - 1) // LANES)
+    im = ti.max(i - 1, 0)
+    ip = ti.min(i + 1, H - 1)
+    for e in range(1, E1 + 1):
+        cn, en, dn = lane_edge_diag(on, c, im, i, ip, e)
+        cnp, enp, dnp = lane_edge_diag(on, q, im, i, ip, e)
+        i_on = delayed_mix(cn, en, dn, cnp, enp, dnp, kn[0], kn[1], kn[2], an[0], an[1], an[2])
+        cf, ef, df = lane_edge_diag(off, c, im, i, ip, e)
+        cfp, efp, dfp = lane_edge_diag(off, q, im, i, ip, e)
+        i_off = delayed_mix(cf, ef, df, cfp, efp, dfp, kf[0], kf[1], kf[2], af[0], af[1], af[2])
+        I_on[i, e] = i_on
+        I_off[i, e] = i_off
+        S[i, e] = lgmd2_summation(cn, cf, i_on, i_off, w_on, w_off, e3)
+    fill_ghosts(S, 0, i, 1, 1, W, 1, REPLICATE)
+
+
+@ti.kernel
+def lgmd2_lanes_layers(
+    on: ti.template(), off: ti.template(), c: ti.i32, q: ti.i32, I_on: ti.template(), I_off: ti.template(),
+    S: ti.template(), Ce: ti.template(), G: ti.template(), w_on: ti.f32, w_off: ti.f32,
+    kn0: ti.f32, kn1: ti.f32, kn2: ti.f32, an0: ti.f32, an1: ti.f32, an2: ti.f32,
+    kf0: ti.f32, kf1: ti.f32, kf2: ti.f32, af0: ti.f32, af1: ti.f32, af2: ti.f32,
+    e_on: ti.f32, e_off: ti.f32, e_onoff: ti.f32, delta_c: ti.f32, c_w: ti.f32, c_de: ti.f32, t_de: ti.f32,
+    nw: ti.i32, sync: ti.template(), rbuf: ti.template(), msum: ti.template(), W: ti.template(),
+) -> VEC2D:
+    """:func:`lgmd2_layers` on lane fields, in one launch by persistent workers (channels:
+    buffer ``c`` of ``on``/``off`` now, ``q`` the frame before); returns ``(sum G, max |Ce|)``."""
+    H = S.shape[0]
+    kn = ti.Vector([kn0, kn1, kn2])
+    an = ti.Vector([an0, an1, an2])
+    kf = ti.Vector([kf0, kf1, kf2])
+    af = ti.Vector([af0, af1, af2])
+    e3 = ti.Vector([e_on, e_off, e_onoff])
+    reset_sync(sync, rbuf, nw)
+    msum[0] = 0.0
+    for slot in range(nw * WORKER_STRIDE):
+        if slot % WORKER_STRIDE == 0:
+            w = slot // WORKER_STRIDE
+            while True:
+                i0, i1 = claim_rows(sync, 0, w, nw, H)
+                if i0 >= i1:
+                    break
+                for i in range(i0, i1):
+                    _lane_lgmd2_row(on, off, c, q, I_on, I_off, S, i, H, kn, an, kf, af, w_on, w_off, e3, W)
+                finish_rows(sync, 0, i1 - i0)
+            wait_phase(sync, 0, H)
+            while True:
+                i0, i1 = claim_rows(sync, 1, w, nw, H)
+                if i0 >= i1:
+                    break
+                m = 0.0
+                for i in range(i0, i1):
+                    m = ti.max(m, ti.cast(_lane_box_row(S, Ce, i, H, W, "max"), ti.f32))
+                ti.atomic_max(rbuf[0, 0], m)
+                finish_rows(sync, 1, i1 - i0)
+            wait_phase(sync, 1, H)
+            inv_omega = 1.0 / (delta_c + ti.max(rbuf[0, 0], 0.0) / c_w)
+            while True:
+                i0, i1 = claim_rows(sync, 2, w, nw, H)
+                if i0 >= i1:
+                    break
+                acc = ti.f64(0.0)
+                for i in range(i0, i1):
+                    E1 = ti.static((LANES + W - 1) // LANES)
+                    for e in range(1, E1 + 1):
+                        g = lgmd2_grouping(S[i, e], Ce[i, e], inv_omega, c_de, t_de)
+                        G[i, e] = g
+                        acc += ti.cast((g * lane_mask(e, W)).sum(), ti.f64)
+                ti.atomic_add(msum[0], acc)
+                finish_rows(sync, 2, i1 - i0)
+    return ti.Vector([msum[0], ti.cast(ti.max(rbuf[0, 0], 0.0), ti.f64)])

@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import io
+import threading
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -476,3 +477,33 @@ def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bo
             )
         traces.append(trace)
     return traces
+
+
+class SharedWorkspace:
+    """Taichi fields for one frame size, shared by the fast backends of one kind and size.
+
+    Fast kernels take fields as template arguments, so they compile once per field
+    set; one set per (kind, frame size) keeps that to one compile per size. The
+    backend that last used a workspace owns it (``owner``: a weakref); another
+    backend of the same size first evicts the owner's state to NumPy. ``lock``
+    serialises frames of models that share it (a Dask worker with several threads,
+    a host program's threads): :meth:`Model.step` holds the backend's ``lock``.
+    """
+
+    _pool: "ClassVar[dict[tuple[type, tuple[int, int]], SharedWorkspace]]" = {}
+    _pool_lock = threading.Lock()
+
+    def __init__(self, shape: tuple[int, int]):
+        self.shape = tuple(shape)
+        self.owner: Any = None
+        self.lock = threading.RLock()
+
+    @classmethod
+    def get(cls, shape: tuple[int, int]) -> Any:
+        """The workspace of this kind for frames of ``shape`` (H, W), built on first use."""
+        key = (cls, tuple(shape))
+        with SharedWorkspace._pool_lock:
+            ws = SharedWorkspace._pool.get(key)
+            if ws is None:
+                ws = SharedWorkspace._pool[key] = cls(tuple(shape))
+            return ws

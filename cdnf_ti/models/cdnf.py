@@ -6,7 +6,6 @@ float64). Convergence control: :mod:`cdnf_ti.solver`.
 """
 from __future__ import annotations
 
-import threading
 from typing import Sequence
 
 import numpy as np
@@ -14,7 +13,7 @@ import numpy as np
 from ..params import THETA_SCALE, CDNFParams, contrast_kernel, dog_profiles, resting_levels, sigmoid
 from ..reference import NumpyCDNFBackend
 from ..solver import RESTART_GROWTH, SolveReport, solve_fixed_point
-from .base import Model, ModelBackend, StepResult, Trace
+from .base import Model, ModelBackend, SharedWorkspace, StepResult, Trace
 from .registry import register_model
 
 
@@ -122,19 +121,12 @@ class TaichiCDNFBackend:
         }
 
 
-class _LaneWorkspace:
-    """Taichi Vector fields for one frame size, shared by the fast backends of that size.
-
-    The lane kernels take fields as template arguments, so they are compiled once
-    per field set; sharing one set per frame size keeps that to one compile per
-    size. The backend that last used the workspace owns it; another backend of
-    the same size first evicts the owner's state to NumPy (see
-    :class:`LaneTaichiCDNFBackend`).
-    """
-
-    _pool: "dict[tuple[int, int], _LaneWorkspace]" = {}
+class _LaneWorkspace(SharedWorkspace):
+    """The C-DNF lane fields of one frame size (see :class:`~cdnf_ti.models.base.SharedWorkspace`
+    and :class:`LaneTaichiCDNFBackend`)."""
 
     def __init__(self, shape: tuple[int, int]):
+        super().__init__(shape)
         from ..taichi_runtime import dsl
 
         ti = dsl()
@@ -158,10 +150,6 @@ class _LaneWorkspace:
         self.rbuf = ti.field(ti.f32, (MAX_STEPS, 2))  # per-update residuals of a solve launch
         self.msum = ti.field(ti.f64, 2)  # sum theta([v]+) of a converged Summation solve, and its flag
         self.coef = np.zeros((MAX_STEPS, 2), np.float32)  # (lam, mom) per update of a launch
-        self.owner = None  # weakref to the backend whose state is resident
-        # One frame at a time per workspace: models of this size in other threads (a Dask worker
-        # with several threads, a host program's threads) wait instead of mixing their states.
-        self.lock = threading.RLock()
 
     def all_active(self) -> None:
         """Mark every element of both groups pending (after any change made outside the kernels)."""
@@ -169,16 +157,6 @@ class _LaneWorkspace:
 
         for pend in self.pend.values():
             lanes_pending_all(pend, self.W)
-
-    _pool_lock = threading.Lock()
-
-    @classmethod
-    def get(cls, shape: tuple[int, int]) -> "_LaneWorkspace":
-        with cls._pool_lock:
-            ws = cls._pool.get(shape)
-            if ws is None:
-                ws = cls._pool[shape] = cls(shape)
-            return ws
 
 
 class LaneTaichiCDNFBackend:

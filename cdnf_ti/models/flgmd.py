@@ -48,9 +48,9 @@ import numpy as np
 
 from ..baselines_reference import NumpyFLGMDBackend
 from ..params import ModelParams, check_params, contrast_kernel, kernel_spectrum
-from ..solver import solve_fixed_point
+from ..solver import RESTART_GROWTH, solve_fixed_point
 from .lgmd1 import LGMD1, LGMD1Params, lgmd1_checks
-from .lgmd2 import TaichiLGMDBackend, lowpass_coefficient
+from .lgmd2 import LaneTaichiLGMDBackend, LGMDLanes, TaichiLGMDBackend, lowpass_coefficient
 from .registry import register_model
 
 
@@ -248,6 +248,99 @@ class TaichiFLGMDBackend(TaichiLGMDBackend):
         """FFI-held frame: the channels keep their previous values (nothing to do)."""
 
 
+class _FLGMDLanes(LGMDLanes):
+    LAYERS = ("L", "P", "on", "off", "on0", "off0", "q_on", "q_off", "S_on", "S_off", "S", "G")
+    #: the settled channel of the last frame and two buffers for the iteration
+    CHANNEL_BUFFERS = 3
+
+
+class LaneTaichiFLGMDBackend(LaneTaichiLGMDBackend):
+    """The fast F-LGMD backend on the CPU: the layers in lane-vectorised Vector fields (float32).
+
+    Same interface, equations, iteration schedule and residuals as
+    :class:`TaichiFLGMDBackend`; the kernels are :func:`~cdnf_ti.kernels.lgmd.lanes_load_frame`
+    (with the frame's constant inhibition ``Q`` and the iterate's start, so :meth:`prepare`
+    only picks buffers) and ``flgmd_lanes_*``. A whole solve runs in one launch
+    (:meth:`feedback_iterate_many`), which also computes the layers when it converges.
+    """
+
+    workspace_type = _FLGMDLanes
+    FIELD_LAYERS = TaichiFLGMDBackend.LAYERS
+
+    def _setup(self) -> None:
+        p, dt = self.params, self.dt
+        self.steps = self.K.MAX_STEPS  # updates per solve launch (feedback_iterate_many)
+        self._tol32 = float(np.float32(p.tol))
+        self._sum_g: float | None = None  # sum G computed by a converged solve launch
+        a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
+        # edge and diagonal weights of Q = w_i sum K (1 - a) X(t-1), per channel
+        self.q_weights = tuple(w * k * (1.0 - x) for w in (p.w_i_on, p.w_i_off) for k, x in zip(p.k_lateral, a))
+        self.w_on, self.w_off = p.feedback_stencils(dt)
+
+    def _reset_buffers(self) -> None:
+        self.settled = [0, 0]  # buffer of the settled ON, OFF channel
+        self.iterate = [1, 1]  # buffer of the current iterate of ON, OFF
+
+    def load(self, grey: np.ndarray, first: bool) -> float:
+        """Photoreceptors, drives, constant inhibition and the iterate's start; returns ``sum |P|``."""
+        ws = self._acquire()
+        self.iterate = [(c + 1) % 3 for c in self.settled]
+        self._sum_g = None
+        return self._load(grey, first, self.settled[0], self.iterate[0], self.settled[1], self.iterate[1],
+                          (ws.on0, ws.off0, ws.q_on, ws.q_off, *self.q_weights))
+
+    def prepare(self) -> None:
+        """Nothing to compute: :meth:`load` wrote ``Q`` and the iterate's start."""
+
+    def feedback_iterate(self, lam: float, mom: float = 0.0) -> tuple[float, float]:
+        """One update ``X <- X + mom (X - X_prev) + lam (T(X) - X)``; returns the residuals before it."""
+        return self.feedback_iterate_many([(lam, mom)])[0]
+
+    def feedback_iterate_many(self, coefs) -> list[tuple[float, float]]:
+        """Several updates in one launch (``coefs``: ``(lam, mom)`` each, at most ``steps``); see the solver.
+
+        A launch that converges also computes the layers at the fixed point (:meth:`finish`
+        then only reads ``sum G``).
+        """
+        ws = self._acquire()
+        p = self.params
+        if not 1 <= len(coefs) <= self.steps:
+            raise ValueError(f"1..{self.steps} updates per launch, got {len(coefs)}")
+        ws.coef[: len(coefs)] = np.asarray(coefs, np.float32).reshape(-1, 2)
+        with_off = p.beta_off != 0.0
+        cur = list(self.iterate)
+        other = [3 - self.settled[k] - cur[k] for k in range(2)]  # the third buffer: the iterate before
+        r = self.K.flgmd_lanes_solve(ws.on0, ws.off0, ws.on, ws.off, ws.q_on, ws.q_off, ws.S_on, ws.S_off, ws.S, ws.G,
+                                     cur[0], other[0], cur[1], other[1], *self.w_on, *self.w_off, p.beta_on,
+                                     p.beta_off, p.t_s, ws.coef, len(coefs), self._tol32, RESTART_GROWTH, self.nw,
+                                     ws.sync, ws.rbuf, ws.msum, self.W, with_off)
+        res = []
+        for j in range(len(coefs)):
+            if min(r[2 * j], r[2 * j + 1]) < 0.0:  # not run
+                break
+            res.append((float(r[2 * j]), float(r[2 * j + 1])))
+        if len(res) % 2:
+            self.iterate = [other[0], other[1] if with_off else cur[1]]
+        self._sum_g = float(r[2 * self.K.MAX_STEPS]) if r[2 * self.K.MAX_STEPS] >= 0.0 else None
+        return res
+
+    def finish(self) -> float:
+        """The layers at the fixed point; returns ``sum G`` (already computed by a converged launch)."""
+        self.settled = list(self.iterate)
+        if self._sum_g is not None:
+            return self._sum_g
+        ws = self._acquire()
+        p = self.params
+        return float(self.K.flgmd_lanes_finish(ws.on, ws.off, *self.settled, ws.q_on, ws.q_off, ws.S_on, ws.S_off,
+                                               ws.S, ws.G, *self.w_on, *self.w_off, p.t_s, self.W))
+
+    def hold(self) -> None:
+        """FFI-held frame: the channels keep their previous values (nothing to do)."""
+
+    def _channel_buffers(self) -> tuple[int, int]:
+        return self.settled[0], self.settled[1]
+
+
 @register_model
 class FLGMDONn(LGMD1):
     """F-LGMD ONn (after Chang et al. 2023) -- a documented RECONSTRUCTION.
@@ -276,6 +369,7 @@ class FLGMDONn(LGMD1):
                    "solved as a fixed point -- RECONSTRUCTION")
 
     taichi_backend_type = TaichiFLGMDBackend
+    lane_backend_type = LaneTaichiFLGMDBackend
     numpy_backend_type = NumpyFLGMDBackend
 
     def _diag0(self) -> dict[str, float]:
@@ -296,7 +390,8 @@ class FLGMDONn(LGMD1):
         be = self._be
         be.prepare()
         rep = solve_fixed_point(be.feedback_iterate, 2, tol=p.tol, max_iter=p.max_iter, damping=p.damping,
-                                min_damping=p.min_damping, stall_patience=p.stall_patience, bounds=self._bounds)
+                                min_damping=p.min_damping, stall_patience=p.stall_patience, bounds=self._bounds,
+                                steps=getattr(be, "steps", 1), iterate_many=getattr(be, "feedback_iterate_many", None))
         sum_g = be.finish()
         extra = dict(iterations=max(rep.iterations), residual_on=rep.residuals[0], residual_off=rep.residuals[1])
         return sum_g, extra, rep.converged

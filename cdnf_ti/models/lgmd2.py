@@ -28,6 +28,7 @@ base class :class:`LGMDFamily` that runs them identically for both backends.
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
 from typing import Any, ClassVar, Sequence
 
@@ -35,8 +36,8 @@ import numpy as np
 
 from ..baselines_reference import NumpyLGMD2Backend
 from ..params import ModelParams, check_params, sigmoid
-from ..taichi_runtime import dsl, ensure_taichi
-from .base import Model, StepResult, Trace
+from ..taichi_runtime import cpu_threads, dsl, ensure_taichi
+from .base import Model, SharedWorkspace, StepResult, Trace
 from .registry import register_model
 
 
@@ -268,6 +269,186 @@ class TaichiLGMD2Backend(TaichiLGMDBackend):
         return float(r[0]), float(r[1])
 
 
+class LGMDLanes(SharedWorkspace):
+    """The lane fields of an LGMD-family model for one frame size (:class:`LaneTaichiLGMDBackend`).
+
+    Every layer in :attr:`LAYERS` is a ``ti.Vector.field(LANES, f32, (H, NB))`` in the lane
+    layout of :mod:`cdnf_ti.kernels.common`; the channels ``on``/``off`` have
+    :attr:`CHANNEL_BUFFERS` buffers (leading index). Each model has its own subclass, so its
+    fields (and compiled kernels) are shared by the models of that kind and size only.
+    """
+
+    LAYERS: ClassVar[tuple[str, ...]] = ("L", "P", "on", "off")
+    CHANNEL_BUFFERS: ClassVar[int] = 2
+
+    def __init__(self, shape: tuple[int, int]):
+        super().__init__(shape)
+        from ..kernels.common import LANES, MAX_STEPS, lane_layout, sync_size
+
+        ti = dsl()
+        H, W = shape
+        _, nb = lane_layout(W)
+        for name in self.LAYERS:
+            lead = (self.CHANNEL_BUFFERS,) if name in ("on", "off") else ()
+            setattr(self, name, ti.Vector.field(LANES, ti.f32, shape=(*lead, H, nb)))
+        self.sync = ti.field(ti.i32, sync_size())  # phase counters of the persistent workers
+        self.rbuf = ti.field(ti.f32, (MAX_STEPS, 2))  # per-phase maxima (residuals, max |Ce|)
+        self.msum = ti.field(ti.f64, 2)  # a launch's float64 sum, and a flag
+        self.coef = np.zeros((MAX_STEPS, 2), np.float32)  # (lam, mom) per update of a solve launch
+
+
+class LaneTaichiLGMDBackend:
+    """The fast CPU backend of an LGMD-family model: its layers in lane-vectorised Vector fields.
+
+    Same interface, equations and results as the model's ndarray backend
+    (:class:`TaichiLGMDBackend`); the kernels are the ``lanes_*`` ones of
+    :mod:`cdnf_ti.kernels.lgmd`. The fields are shared per model kind and frame size
+    (:attr:`workspace_type`); a backend whose state was evicted by another one of
+    the same kind and size gets it back from NumPy.
+
+    Parameters
+    ----------
+    params : the model's parameters
+    shape : (H, W)
+    dt : int
+        Frame interval (ms).
+    arch : str
+    """
+
+    name = "taichi"
+    workspace_type: ClassVar[type[LGMDLanes]]
+    #: Layers listed by :meth:`fields` besides ``P``, ``ON``, ``OFF``.
+    FIELD_LAYERS: ClassVar[tuple[str, ...]] = ()
+    #: Work items per row of the load kernel (element blocks), so both CPU threads get rows.
+    BLOCKS = 4
+
+    @staticmethod
+    def supports(shape: tuple[int, int], arch: str = "cpu") -> bool:
+        """The CPU, frames at least ``2 * LANES`` wide and two rows high."""
+        from ..kernels.common import LANES
+
+        return arch == "cpu" and shape[1] >= 2 * LANES and shape[0] >= 2
+
+    def __init__(self, params: Any, shape: tuple[int, int], dt: int, arch: str = "cpu"):
+        ensure_taichi(arch)
+        from ..kernels import lgmd as K
+
+        self.K = K
+        self.params = params
+        self.shape = tuple(shape)
+        self.W = int(shape[1])
+        self.dt = dt
+        self.nw = min(cpu_threads(), K.MAX_WORKERS)  # persistent workers per launch
+        self.ws = self.workspace_type.get(self.shape)
+        self.lock = self.ws.lock
+        self._ref = weakref.ref(self)
+        self._saved: dict[str, np.ndarray] | None = None
+        self._setup()
+        with self.lock:
+            self.reset()
+
+    def _setup(self) -> None:
+        """The model's constants."""
+
+    # -- workspace ownership -----------------------------------------------
+    def _acquire(self) -> LGMDLanes:
+        ws = self.ws
+        owner = ws.owner() if ws.owner is not None else None
+        if owner is not self:
+            if owner is not None:
+                owner._evict()
+            ws.owner = self._ref
+            if self._saved is not None:
+                for name, x in self._saved.items():
+                    getattr(ws, name).from_numpy(x)
+                self._saved = None
+        return ws
+
+    def _evict(self) -> None:
+        ws = self.ws
+        self._saved = {name: getattr(ws, name).to_numpy() for name in ws.LAYERS}
+        ws.owner = None
+
+    # -- backend interface ---------------------------------------------------
+    def reset(self) -> None:
+        ws = self._acquire()
+        for name in ws.LAYERS:
+            self.K.lanes_fill(getattr(ws, name), 0.0)
+        self._reset_buffers()
+
+    def _reset_buffers(self) -> None:
+        """Back to the first buffers of the channels."""
+
+    def _load(self, grey: np.ndarray, first: bool, c_on: int, s_on: int, c_off: int, s_off: int,
+              feedback: tuple = ()) -> float:
+        """:func:`cdnf_ti.kernels.lgmd.lanes_load_frame`: channels ``s`` from ``c``; returns ``sum |P|``.
+
+        ``feedback``: F-LGMD's ``(on0, off0, q_on, q_off, qn1, qn2, qf1, qf2)``, else empty.
+        """
+        ws = self._acquire()
+        p = self.params
+        scale = 1.0 if grey.dtype == np.uint8 else 255.0
+        extra = feedback or (ws.P, ws.P, ws.P, ws.P, 0.0, 0.0, 0.0, 0.0)  # not read without feedback
+        return float(self.K.lanes_load_frame(grey, ws.L, ws.P, ws.on, ws.off, c_on, s_on, c_off, s_off, scale,
+                                             int(first), p.clip, p.dc, self.W, self.BLOCKS, bool(feedback), *extra))
+
+    def _channel_buffers(self) -> tuple[int, int]:
+        """Buffers of the ON and OFF channels that :meth:`fields` shows."""
+        raise NotImplementedError
+
+    def fields(self) -> dict[str, np.ndarray]:
+        ws = self._acquire()
+        from ..kernels.common import LANES
+
+        H, W = self.shape
+
+        def frame(x: np.ndarray) -> np.ndarray:
+            return np.ascontiguousarray(x.reshape(H, -1)[:, LANES:LANES + W])
+
+        b_on, b_off = self._channel_buffers()
+        out = {"P": frame(ws.P.to_numpy()), "ON": frame(ws.on.to_numpy()[b_on]),
+               "OFF": frame(ws.off.to_numpy()[b_off])}
+        for name in self.FIELD_LAYERS:
+            out[name] = frame(getattr(ws, name).to_numpy())
+        return out
+
+
+class _LGMD2Lanes(LGMDLanes):
+    LAYERS = ("L", "P", "on", "off", "I_on", "I_off", "S", "Ce", "G")
+
+
+class LaneTaichiLGMD2Backend(LaneTaichiLGMDBackend):
+    """LGMD2 layers on lane fields (see :class:`LGMD2`): a frame's layers in one launch."""
+
+    workspace_type = _LGMD2Lanes
+    FIELD_LAYERS = ("I_on", "I_off", "S", "Ce", "G")
+
+    def _setup(self) -> None:
+        p, dt = self.params, self.dt
+        self.an = tuple(lowpass_coefficient(dt, t) for t in p.tau_on)
+        self.af = tuple(lowpass_coefficient(dt, t) for t in p.tau_off)
+
+    def _reset_buffers(self) -> None:
+        self.c = 0  # the current ON/OFF buffers; load writes the other ones
+
+    def load(self, grey: np.ndarray, first: bool) -> float:
+        n = 1 - self.c
+        return self._load(grey, first, self.c, n, self.c, n)
+
+    def layers(self, w_on: float, w_off: float) -> tuple[float, float]:
+        """Delayed inhibition, S, grouping (ON/OFF from :meth:`load`); returns ``(sum G, max |Ce|)``."""
+        ws = self._acquire()
+        p = self.params
+        q, self.c = self.c, 1 - self.c
+        r = self.K.lgmd2_lanes_layers(ws.on, ws.off, self.c, q, ws.I_on, ws.I_off, ws.S, ws.Ce, ws.G, w_on, w_off,
+                                      *p.k_on, *self.an, *p.k_off, *self.af, p.w_on_exc, p.w_off_exc, p.w_onoff,
+                                      p.delta_c, p.c_w, p.c_de, p.t_de, self.nw, ws.sync, ws.rbuf, ws.msum, self.W)
+        return float(r[0]), float(r[1])
+
+    def _channel_buffers(self) -> tuple[int, int]:
+        return self.c, self.c
+
+
 class LGMDFamily(Model):
     """Shared orchestration of the LGMD family (both backends).
 
@@ -306,7 +487,17 @@ class LGMDFamily(Model):
     def _setup(self) -> None:
         self.dt = frame_interval_ms(self.fps)
 
-    def _taichi_backend(self, shape: tuple[int, int]) -> TaichiLGMDBackend:
+    #: The fast CPU backend (lane fields), used where it :meth:`~LaneTaichiLGMDBackend.supports`
+    #: the frame; ``None``: the model has none.
+    lane_backend_type: ClassVar[type[LaneTaichiLGMDBackend] | None] = None
+    #: Use the fast backend where it applies; ``False``: the generic kernels (same equations).
+    fast: bool = True
+
+    def _taichi_backend(self, shape: tuple[int, int]) -> TaichiLGMDBackend | LaneTaichiLGMDBackend:
+        arch = ensure_taichi(self.arch)
+        lanes = self.lane_backend_type
+        if self.fast and lanes is not None and lanes.supports(shape, arch):
+            return lanes(self.params, shape, self.dt, self.arch)
         return self.taichi_backend_type(self.params, shape, self.dt, self.arch)
 
     def _numpy_backend(self, shape: tuple[int, int]) -> Any:
@@ -370,6 +561,7 @@ class LGMD2(LGMDFamily):
     description = "LGMD2 (Fu et al. 2020): biased ON/OFF, adaptive inhibition, SFA; equations from the authors' code"
 
     taichi_backend_type = TaichiLGMD2Backend
+    lane_backend_type = LaneTaichiLGMD2Backend
     numpy_backend_type = NumpyLGMD2Backend
 
     def _step(self, t: int, grey: np.ndarray, sum_p: float) -> StepResult:

@@ -1,0 +1,173 @@
+"""The lane-vectorised fast paths of LGMD2 and F-LGMD against the NumPy float64 references.
+
+Every kernel of the fast paths (``kernels/lgmd.py``: ``lanes_load_frame``,
+``lgmd2_lanes_layers``, ``flgmd_lanes_*``) is checked against
+:mod:`cdnf_ti.baselines_reference` on generated stimuli (basic, noisy, dashcam-like
+stand-in video and, when ``../shared`` is there, a real clip), at widths that are and
+are not multiples of the lane width; F-LGMD's solve converging inside its launch and
+outside it.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import small_stimulus
+from test_flgmd import noisy_stream
+from test_row_runs import moving_noise
+
+from cdnf_ti.bench.inputs import real_or_standin, standin_video
+from cdnf_ti.models import FLGMDParams, create_model
+from cdnf_ti.models.flgmd import LaneTaichiFLGMDBackend, TaichiFLGMDBackend
+from cdnf_ti.models.lgmd2 import LaneTaichiLGMD2Backend, TaichiLGMD2Backend
+
+ALWAYS_ON = FLGMDParams(t_ffi=1e9)  # no FFI hold: the per-pixel layers run on every frame
+FAST_MODELS = ["lgmd2", "flgmd_onn"]
+LANE_BACKEND = {"lgmd2": LaneTaichiLGMD2Backend, "flgmd_onn": LaneTaichiFLGMDBackend}
+GENERIC_BACKEND = {"lgmd2": TaichiLGMD2Backend, "flgmd_onn": TaichiFLGMDBackend}
+STEPS = {"lgmd2": "max_Ce", "flgmd_onn": "iterations"}  # a per-frame diagnostic of the per-pixel layers
+
+
+def default_params(model):
+    return ALWAYS_ON if model == "flgmd_onn" else None
+
+
+def run_fast_and_reference(frames, params=None, model="flgmd_onn"):
+    fast, ref = create_model(model, params), create_model(model, params, backend="numpy")
+    a, b = fast.run(frames), ref.run(frames)
+    assert isinstance(fast._be, LANE_BACKEND[model])
+    return fast, a, ref, b
+
+
+def assert_fields_close(fast, ref, rel=1e-4):
+    fa, fb = fast.fields(), ref.fields()
+    assert set(fa) == set(fb)
+    for k in fb:
+        scale = max(1.0, float(np.abs(fb[k]).max()))
+        np.testing.assert_allclose(fa[k], fb[k], atol=rel * scale, rtol=0, err_msg=k)
+
+
+@pytest.mark.parametrize("width", [33, 48, 70])  # part of a lane, whole lanes, several (each compiles)
+@pytest.mark.parametrize("model", FAST_MODELS)
+def test_fast_path_matches_reference_at_widths_around_the_lane_width(model, width):
+    frames = moving_noise(7, width, seed=width, n=7)
+    fast, a, ref, b = run_fast_and_reference(frames, default_params(model), model)
+    np.testing.assert_allclose(a.output, b.output, atol=1e-5, rtol=0)
+    np.testing.assert_allclose(a.diagnostics[STEPS[model]], b.diagnostics[STEPS[model]], rtol=1e-4, atol=1e-5)
+    assert_fields_close(fast, ref)
+
+
+@pytest.mark.parametrize("model", FAST_MODELS)
+def test_fast_path_matches_reference_on_dashcam_like_video(model):
+    frames = [f[::2, ::3] for f in standin_video(8, seed=1)]  # 120 x 142, every pixel moves
+    fast, a, ref, b = run_fast_and_reference(frames, default_params(model), model)
+    np.testing.assert_allclose(a.output, b.output, atol=1e-5, rtol=0)
+    if model == "flgmd_onn":
+        assert b.diagnostics["iterations"][1:].min() > 3  # the ON feedback really iterates
+        assert np.abs(a.diagnostics["iterations"] - b.diagnostics["iterations"]).max() <= 1
+    assert a.converged.all()
+    assert_fields_close(fast, ref)
+
+
+@pytest.mark.parametrize("model", FAST_MODELS)
+def test_fast_path_matches_reference_on_real_footage_or_its_standin(model):
+    _, frames = real_or_standin(6)  # the shared dashcam clip at 426 x 240 when present
+    fast, a, ref, b = run_fast_and_reference(frames, None, model)
+    np.testing.assert_allclose(a.output, b.output, atol=1e-5, rtol=0)
+    np.testing.assert_array_equal(a.spike, b.spike)
+    assert_fields_close(fast, ref)
+
+
+@pytest.mark.parametrize("stim", ["dark_looming", "light_translating"])
+@pytest.mark.parametrize("model", FAST_MODELS)
+def test_fast_path_matches_reference_on_basic_stimuli(model, stim):
+    _, a, _, b = run_fast_and_reference(list(small_stimulus(stim, 96).frames()), None, model)
+    np.testing.assert_allclose(a.output, b.output, atol=1e-5, rtol=0)
+    np.testing.assert_array_equal(a.diagnostics["count"], b.diagnostics["count"])
+
+
+def test_fast_path_with_feedback_on_both_channels():
+    p = FLGMDParams(beta_off=0.3, t_ffi=1e9)
+    fast, a, ref, b = run_fast_and_reference(noisy_stream("dark_looming", seed=2, h=48, w=70), p)
+    np.testing.assert_allclose(a.output, b.output, atol=1e-5, rtol=0)
+    assert b.diagnostics["residual_off"][1:].max() > 0 or b.diagnostics["iterations"][1:].max() > 1
+    assert a.diagnostics["residual_off"].max() < p.tol
+    assert_fields_close(fast, ref)
+
+
+def test_fast_path_plain_scheme_matches_reference():
+    p = FLGMDParams(scheme="plain", t_ffi=1e9)
+    _, a, _, b = run_fast_and_reference(noisy_stream("light_looming", seed=5, h=40, w=70), p)
+    np.testing.assert_allclose(a.output, b.output, atol=1e-5, rtol=0)
+    assert a.converged.all()
+
+
+def test_unconverged_launches_finish_the_layers_in_a_separate_kernel():
+    # With a budget of 2 updates the solve launch never converges, so the layers come from
+    # flgmd_lanes_finish instead of the solve launch; both backends run the same 2 updates.
+    p = FLGMDParams(max_iter=2, t_ffi=1e9)
+    frames = noisy_stream("light_looming", seed=11, h=40, w=70)
+    with pytest.warns(Warning):
+        fast, a, ref, b = run_fast_and_reference(frames, p)
+    assert not b.converged[1:].any()
+    np.testing.assert_allclose(a.output, b.output, atol=1e-5, rtol=0)
+    assert_fields_close(fast, ref)
+
+
+@pytest.mark.parametrize("model", FAST_MODELS)
+def test_fast_and_generic_kernels_give_the_same_trace(model):
+    frames = noisy_stream("light_looming", seed=11, w=70)
+    fast = create_model(model).run(frames)
+    generic_model = create_model(model)
+    generic_model.fast = False
+    generic = generic_model.run(frames)
+    assert isinstance(generic_model._be, GENERIC_BACKEND[model])
+    np.testing.assert_allclose(fast.output, generic.output, atol=1e-6, rtol=0)
+    np.testing.assert_allclose(fast.diagnostics[STEPS[model]], generic.diagnostics[STEPS[model]], rtol=1e-5)
+
+
+@pytest.mark.parametrize("model", FAST_MODELS)
+def test_narrow_frames_fall_back_to_generic_kernels(model):
+    m = create_model(model)
+    m.run(moving_noise(6, 20, seed=1, n=2))
+    assert isinstance(m._be, GENERIC_BACKEND[model])
+
+
+@pytest.mark.parametrize("model", FAST_MODELS)
+def test_interleaved_models_of_one_size_share_the_workspace_without_mixing_state(model):
+    fa = noisy_stream("dark_looming", seed=3, h=40, w=70)
+    fb = noisy_stream("light_receding", seed=4, h=40, w=70)
+    p = default_params(model)
+    alone_a, alone_b = create_model(model, p).run(fa).output, create_model(model, p).run(fb).output
+    ma, mb = create_model(model, p), create_model(model, p)
+    out_a, out_b = [], []
+    for x, y in zip(fa, fb):
+        out_a.append(ma.step(x).output)
+        out_b.append(mb.step(y).output)
+    assert ma._be.ws is mb._be.ws  # one set of fields for the frame size
+    assert np.array_equal(np.array(out_a), alone_a)
+    assert np.array_equal(np.array(out_b), alone_b)
+    assert np.abs(alone_a - alone_b).max() > 1e-4  # the two streams really differ
+
+
+@pytest.mark.parametrize("workers", [1, 3])
+@pytest.mark.parametrize("model", FAST_MODELS)
+def test_launch_gives_the_same_results_with_any_number_of_workers(model, workers):
+    # Rows are claimed dynamically; each row is computed by one worker with the same arithmetic.
+    # Sums of rows are float64 (their order may change the last bits of sum G only).
+    frames = [f[::2, ::3] for f in standin_video(6, seed=4)]
+    two = create_model(model, default_params(model)).run(frames)
+    other = create_model(model, default_params(model))
+    other._make_backend(frames[0].shape)
+    other._be.nw = workers
+    got = other.run(frames)
+    np.testing.assert_allclose(got.output, two.output, atol=1e-12, rtol=0)
+    np.testing.assert_array_equal(got.diagnostics[STEPS[model]], two.diagnostics[STEPS[model]])
+
+
+@pytest.mark.parametrize("model", FAST_MODELS)
+def test_reset_returns_the_fast_path_to_its_first_frame_state(model):
+    frames = noisy_stream("dark_looming", seed=8, h=40, w=70)
+    m = create_model(model, default_params(model))
+    first = m.run(frames).output
+    again = m.run(frames).output  # run() resets first
+    assert np.array_equal(first, again)
