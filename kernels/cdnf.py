@@ -18,14 +18,12 @@ float64 NumPy reference of the same equations is :mod:`cdnf_ti.reference`.
 import functools
 
 from ..taichi_runtime import dsl
-from .common import (  # noqa: F401 - fill, lanes_fill, LANES, MAX_STEPS, lane_layout and sync_size are part of this module's interface
+from .common import (  # noqa: F401 - fill, lanes_fill, LANES, MAX_STEPS, MAX_WORKERS, lane_layout, sync_size: this module's interface
     LANES,
     LAST_PHASE,
     LOAD_PHASE,
     MAX_STEPS,
     MAX_WORKERS,
-    REFLECT,
-    REPLICATE,
     WORKER_STRIDE,
     block_span,
     border_index,

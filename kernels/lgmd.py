@@ -441,7 +441,7 @@ def _lane_grey(frame: ti.template(), i, e, scale, W: ti.template()):
 
 
 @ti.kernel
-def lanes_load_frame(
+def lgmd_lanes_load(
     frame: ti.types.ndarray(ndim=2), L: ti.template(), P: ti.template(), on: ti.template(), off: ti.template(),
     c_on: ti.i32, s_on: ti.i32, c_off: ti.i32, s_off: ti.i32, scale: ti.f32, first: ti.i32, clip: ti.f32,
     dc: ti.f32, W: ti.template(), blocks: ti.i32, feedback: ti.template(), on0: ti.template(),
@@ -504,7 +504,7 @@ def _lane_relax(x0: ti.template(), x: ti.template(), q: ti.template(), p, n, im,
 # workers" in kernels/common.py): update j is phase j; when the launch converges the
 # workers go on to the layers at the fixed point (phase MAX_STEPS: S_on, S_off, S;
 # phase MAX_STEPS + 1: G and sum G), so a converged frame costs two launches in all
-# (flgmd_lanes_load and this one).
+# (lgmd_lanes_load and this one).
 
 FINISH_PHASE = MAX_STEPS
 GROUP_PHASE = MAX_STEPS + 1

@@ -1,6 +1,6 @@
 """The lane-vectorised fast paths of LGMD2 and F-LGMD against the NumPy float64 references.
 
-Every kernel of the fast paths (``kernels/lgmd.py``: ``lanes_load_frame``,
+Every kernel of the fast paths (``kernels/lgmd.py``: ``lgmd_lanes_load``,
 ``lgmd2_lanes_layers``, ``flgmd_lanes_*``) is checked against
 :mod:`cdnf_ti.baselines_reference` on generated stimuli (basic, noisy, dashcam-like
 stand-in video and, when ``../shared`` is there, a real clip), at widths that are and

@@ -14,6 +14,7 @@ import io
 import threading
 import time
 import warnings
+import weakref
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Iterable, Protocol, Sequence, runtime_checkable
 
@@ -497,6 +498,26 @@ class SharedWorkspace:
         self.shape = tuple(shape)
         self.owner: Any = None
         self.lock = threading.RLock()
+
+    def take(self, backend: Any) -> bool:
+        """Make ``backend`` the owner, first evicting the current owner's state (its ``_evict()``).
+
+        Returns True when ``backend`` was not the owner (its state must be put back).
+        """
+        owner = self.owner() if self.owner is not None else None
+        if owner is backend:
+            return False
+        if owner is not None:
+            owner._evict()
+        self.owner = weakref.ref(backend)
+        return True
+
+    def frame(self, x: np.ndarray) -> np.ndarray:
+        """The (H, W) frame columns of a lane field's ``to_numpy()`` array (H, NB, LANES)."""
+        from ..kernels.common import LANES
+
+        H, W = self.shape
+        return np.ascontiguousarray(x.reshape(H, -1)[:, LANES:LANES + W])
 
     @classmethod
     def get(cls, shape: tuple[int, int]) -> Any:

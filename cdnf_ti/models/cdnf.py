@@ -191,8 +191,6 @@ class LaneTaichiCDNFBackend:
         return arch == "cpu" and shape[1] >= 2 * LANES and shape[0] >= 2 and int(params.radius_s) < LANES
 
     def __init__(self, params: CDNFParams, shape: tuple[int, int], arch: str = "cpu"):
-        import weakref
-
         from ..taichi_runtime import cpu_threads, ensure_taichi
 
         ensure_taichi(arch)
@@ -208,7 +206,6 @@ class LaneTaichiCDNFBackend:
         self.lock = self.ws.lock  # held by the model around each frame (Model.step)
         self.nw = min(cpu_threads(), K.MAX_WORKERS)  # persistent workers per solve launch
         self.tau = float(params.tol) * self.freeze
-        self._ref = weakref.ref(self)
         # W_c = k k^T with k the normalised 3-tap Gaussian (contrast_kernel is its outer product)
         k = np.exp(-np.arange(-1, 2) ** 2 / (2.0 * params.sigma_c**2))
         k /= k.sum()
@@ -237,12 +234,8 @@ class LaneTaichiCDNFBackend:
 
     def _acquire(self) -> "_LaneWorkspace":
         ws = self.ws
-        owner = ws.owner() if ws.owner is not None else None
-        if owner is self:
+        if not ws.take(self):
             return ws
-        if owner is not None:
-            owner._evict()
-        ws.owner = self._ref
         self._s_ready, self._mean = False, None
         K = self.K
         if self._fresh:
@@ -416,19 +409,14 @@ class LaneTaichiCDNFBackend:
             return mean
         return float(self.K.lanes_mean_activation(ws.v, self.s, THETA_SCALE, self.W))
 
-    def _frame(self, x: np.ndarray) -> np.ndarray:
-        from ..kernels.cdnf import LANES
-
-        return np.ascontiguousarray(x.reshape(self.H, -1)[:, LANES:LANES + self.W])
-
     def fields(self) -> dict[str, np.ndarray]:
         ws = self._acquire()
         self._flush_load()
         return {
-            "u_on": self._frame(ws.u_on.to_numpy()[self.c]),
-            "u_off": self._frame(ws.u_off.to_numpy()[self.c]),
-            "v": self._frame(ws.v.to_numpy()[self.s]),
-            "P": self._frame(ws.P.to_numpy()),
+            "u_on": self.ws.frame(ws.u_on.to_numpy()[self.c]),
+            "u_off": self.ws.frame(ws.u_off.to_numpy()[self.c]),
+            "v": self.ws.frame(ws.v.to_numpy()[self.s]),
+            "P": self.ws.frame(ws.P.to_numpy()),
         }
 
 

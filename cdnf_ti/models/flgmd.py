@@ -258,7 +258,7 @@ class LaneTaichiFLGMDBackend(LaneTaichiLGMDBackend):
     """The fast F-LGMD backend on the CPU: the layers in lane-vectorised Vector fields (float32).
 
     Same interface, equations, iteration schedule and residuals as
-    :class:`TaichiFLGMDBackend`; the kernels are :func:`~cdnf_ti.kernels.lgmd.lanes_load_frame`
+    :class:`TaichiFLGMDBackend`; the kernels are :func:`~cdnf_ti.kernels.lgmd.lgmd_lanes_load`
     (with the frame's constant inhibition ``Q`` and the iterate's start, so :meth:`prepare`
     only picks buffers) and ``flgmd_lanes_*``. A whole solve runs in one launch
     (:meth:`feedback_iterate_many`), which also computes the layers when it converges.

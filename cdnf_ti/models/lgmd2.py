@@ -28,7 +28,6 @@ base class :class:`LGMDFamily` that runs them identically for both backends.
 from __future__ import annotations
 
 import math
-import weakref
 from dataclasses import dataclass
 from typing import Any, ClassVar, Sequence
 
@@ -341,7 +340,6 @@ class LaneTaichiLGMDBackend:
         self.nw = min(cpu_threads(), K.MAX_WORKERS)  # persistent workers per launch
         self.ws = self.workspace_type.get(self.shape)
         self.lock = self.ws.lock
-        self._ref = weakref.ref(self)
         self._saved: dict[str, np.ndarray] | None = None
         self._setup()
         with self.lock:
@@ -353,15 +351,10 @@ class LaneTaichiLGMDBackend:
     # -- workspace ownership -----------------------------------------------
     def _acquire(self) -> LGMDLanes:
         ws = self.ws
-        owner = ws.owner() if ws.owner is not None else None
-        if owner is not self:
-            if owner is not None:
-                owner._evict()
-            ws.owner = self._ref
-            if self._saved is not None:
-                for name, x in self._saved.items():
-                    getattr(ws, name).from_numpy(x)
-                self._saved = None
+        if ws.take(self) and self._saved is not None:
+            for name, x in self._saved.items():
+                getattr(ws, name).from_numpy(x)
+            self._saved = None
         return ws
 
     def _evict(self) -> None:
@@ -381,7 +374,7 @@ class LaneTaichiLGMDBackend:
 
     def _load(self, grey: np.ndarray, first: bool, c_on: int, s_on: int, c_off: int, s_off: int,
               feedback: tuple = ()) -> float:
-        """:func:`cdnf_ti.kernels.lgmd.lanes_load_frame`: channels ``s`` from ``c``; returns ``sum |P|``.
+        """:func:`cdnf_ti.kernels.lgmd.lgmd_lanes_load`: channels ``s`` from ``c``; returns ``sum |P|``.
 
         ``feedback``: F-LGMD's ``(on0, off0, q_on, q_off, qn1, qn2, qf1, qf2)``, else empty.
         """
@@ -389,7 +382,7 @@ class LaneTaichiLGMDBackend:
         p = self.params
         scale = 1.0 if grey.dtype == np.uint8 else 255.0
         extra = feedback or (ws.P, ws.P, ws.P, ws.P, 0.0, 0.0, 0.0, 0.0)  # not read without feedback
-        return float(self.K.lanes_load_frame(grey, ws.L, ws.P, ws.on, ws.off, c_on, s_on, c_off, s_off, scale,
+        return float(self.K.lgmd_lanes_load(grey, ws.L, ws.P, ws.on, ws.off, c_on, s_on, c_off, s_off, scale,
                                              int(first), p.clip, p.dc, self.W, self.BLOCKS, bool(feedback), *extra))
 
     def _channel_buffers(self) -> tuple[int, int]:
@@ -398,18 +391,11 @@ class LaneTaichiLGMDBackend:
 
     def fields(self) -> dict[str, np.ndarray]:
         ws = self._acquire()
-        from ..kernels.common import LANES
-
-        H, W = self.shape
-
-        def frame(x: np.ndarray) -> np.ndarray:
-            return np.ascontiguousarray(x.reshape(H, -1)[:, LANES:LANES + W])
-
         b_on, b_off = self._channel_buffers()
-        out = {"P": frame(ws.P.to_numpy()), "ON": frame(ws.on.to_numpy()[b_on]),
-               "OFF": frame(ws.off.to_numpy()[b_off])}
+        out = {"P": ws.frame(ws.P.to_numpy()), "ON": ws.frame(ws.on.to_numpy()[b_on]),
+               "OFF": ws.frame(ws.off.to_numpy()[b_off])}
         for name in self.FIELD_LAYERS:
-            out[name] = frame(getattr(ws, name).to_numpy())
+            out[name] = ws.frame(getattr(ws, name).to_numpy())
         return out
 
 
