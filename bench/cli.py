@@ -43,6 +43,7 @@ class BenchRow:
     iterations: str = ""
     compiler: str = ""
     scheme: str = ""
+    arch: str = "cpu"  # the Taichi backend the row ran on (peers: always the CPU)
     ms_per_iteration: float = float("nan")  # ms per field-iteration (C-DNF: ON, OFF, Summation counted apart)
 
 
@@ -123,13 +124,14 @@ def _iteration_stats(row: BenchRow, diag: dict) -> None:
             row.ms_per_iteration = 1000.0 / row.fps / sum(its)
 
 
-def model_rows(models: Sequence[str], inputs, repeats: int, reference: bool, bar=None) -> list[BenchRow]:
-    """Rows of every model under this process's compiler (C-DNF with both schemes)."""
+def model_rows(models: Sequence[str], inputs, repeats: int, reference: bool, bar=None,
+               arch: str = "cpu") -> list[BenchRow]:
+    """Rows of every model under this process's compiler on ``arch`` (C-DNF with both schemes)."""
     from ..models import create_model
     from ..params import CDNFParams
     from ..taichi_runtime import current_compiler, ensure_taichi
 
-    ensure_taichi("cpu")
+    arch = ensure_taichi(arch)
     comp = current_compiler() or ""
     rows = []
     for in_label, res, frames in inputs:
@@ -140,10 +142,11 @@ def model_rows(models: Sequence[str], inputs, repeats: int, reference: bool, bar
             for scheme, params in variants:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", NotConvergedWarning)  # recorded per frame in "converged"
-                    fps, out, diag = time_model(lambda: create_model(name, params, backend="taichi"), frames, repeats)
+                    fps, out, diag = time_model(lambda: create_model(name, params, backend="taichi", arch=arch),
+                                                 frames, repeats)
                 if bar is not None:
                     bar.update(1)
-                row = BenchRow(name, in_label, res, fps, compiler=comp, scheme=scheme,
+                row = BenchRow(name, in_label, res, fps, compiler=comp, scheme=scheme, arch=arch,
                                max_diff=float(np.abs(out - ref).max()) if ref is not None else float("nan"))
                 _iteration_stats(row, diag)
                 rows.append(row)
@@ -151,7 +154,7 @@ def model_rows(models: Sequence[str], inputs, repeats: int, reference: bool, bar
 
 
 def _child_rows(compiler: str, models: Sequence[str], n_frames: int, repeats: int, clip: str | None,
-                reference: bool, resolutions) -> list[BenchRow]:
+                reference: bool, resolutions, arch: str = "cpu") -> list[BenchRow]:
     """:func:`model_rows` under another compiler, in a child process (one compiler per process)."""
     import json
     import os
@@ -162,7 +165,7 @@ def _child_rows(compiler: str, models: Sequence[str], n_frames: int, repeats: in
         out = os.path.join(tmp, "rows.json")
         cmd = [sys.executable, "-m", "cdnf_ti.run", "bench", "--compiler", compiler, "--models-only", out,
                "--model", ",".join(models), "--frames", str(n_frames), "--repeats", str(repeats),
-               "--sizes", ",".join(f"{w}x{h}" for h, w in resolutions)]
+               "--sizes", ",".join(f"{w}x{h}" for h, w in resolutions), "--arch", arch]
         if clip is not None:
             cmd += ["--clip", str(clip)]
         if not reference:
@@ -180,11 +183,12 @@ def _child_rows(compiler: str, models: Sequence[str], n_frames: int, repeats: in
 def run_bench(models: Sequence[str], n_frames: int = 30, repeats: int = 3, clip: str | None = None,
               reference: bool = True, progress: bool = True,
               resolutions: Sequence[tuple[int, int]] = RESOLUTIONS,
-              compilers: Sequence[str] | None = None) -> list[BenchRow]:
+              compilers: Sequence[str] | None = None, arch: str = "cpu") -> list[BenchRow]:
     """Measure every model under every compiler, and the C-DNF peers; see the module docstring.
 
     ``compilers`` defaults to every installed one; this process's compiler runs here, the
-    others in child processes. Ratios ``x peer`` divide a row's frames/s by the peer's
+    others in child processes. The models run on the Taichi backend ``arch`` (``"cuda"``:
+    a GPU), the peers on the CPU. Ratios ``x peer`` divide a row's frames/s by the peer's
     (plain scheme) on the same input, all from this one run.
     """
     from tqdm import tqdm
@@ -192,7 +196,7 @@ def run_bench(models: Sequence[str], n_frames: int = 30, repeats: int = 3, clip:
     from ..taichi_runtime import current_compiler, ensure_taichi, installed_compilers
     from .peers import PeerCDNF, available_peers
 
-    ensure_taichi("cpu")
+    arch = ensure_taichi(arch)
     here = current_compiler()
     compilers = list(compilers) if compilers is not None else list(installed_compilers())
     peers = list(available_peers())
@@ -202,11 +206,11 @@ def run_bench(models: Sequence[str], n_frames: int = 30, repeats: int = 3, clip:
                desc="bench", unit="run", leave=False, disable=None if progress else True)
     rows: list[BenchRow] = []
     if here in compilers:
-        rows += model_rows(models, inputs, repeats, reference, bar)
+        rows += model_rows(models, inputs, repeats, reference, bar, arch)
     for comp in compilers:
         if comp != here:
             bar.set_description(f"bench ({comp}, child process)")
-            rows += _child_rows(comp, models, n_frames, repeats, clip, reference, resolutions)
+            rows += _child_rows(comp, models, n_frames, repeats, clip, reference, resolutions, arch)
     peer_rows = []
     if "cdnf" in models:
         for in_label, res, frames in inputs:
@@ -238,7 +242,8 @@ def format_table(rows: Sequence[BenchRow]) -> str:
             "ms/field-iter", "max |dI| vs f64 ref", "iters on/off/sum"]
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
     for r in rows:
-        cells = [r.model, r.compiler, r.scheme, r.input, r.resolution, f"{r.fps:.1f}"]
+        comp = r.compiler if r.arch == "cpu" else f"{r.compiler} ({r.arch})"
+        cells = [r.model, comp, r.scheme, r.input, r.resolution, f"{r.fps:.1f}"]
         cells += [f"{r.ratios[p]:.2f}" if p in r.ratios else "" for p in peers]
         cells += ["" if np.isnan(r.ms_per_iteration) else f"{r.ms_per_iteration:.3f}"]
         cells += ["n/a" if np.isnan(r.max_diff) else f"{r.max_diff:.1e}", r.iterations]
@@ -249,7 +254,7 @@ def format_table(rows: Sequence[BenchRow]) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m cdnf_ti.run bench``."""
     from ..run import parse_models
-    from ..taichi_runtime import ensure_taichi
+    from ..taichi_runtime import ARCHS, COMPILERS, check_arch, ensure_taichi, installed_compilers, select_compiler
 
     ap = argparse.ArgumentParser(prog="python -m cdnf_ti.run bench",
                                  description="Throughput table: every model, C-DNF against its peers "
@@ -265,6 +270,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--no-reference", action="store_true", help="skip the float64 reference comparison")
     ap.add_argument("--compiler", default=None,
                     help="comma-separated kernel compilers to measure (default: every installed one)")
+    ap.add_argument("--arch", default="cpu", choices=ARCHS,
+                    help="Taichi backend of the models (default: cpu; the peers always run on the CPU)")
     ap.add_argument("--models-only", default=None, metavar="JSON", help=argparse.SUPPRESS)  # child process mode
     ap.add_argument("--startup", action="store_true",
                     help="also measure start-up (process start to the first frame) with a cold and a warm cache")
@@ -287,7 +294,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         from ..frames import open_source
 
         open_source(args.clip)  # raises InputError with a one-line message
-    from ..taichi_runtime import COMPILERS, installed_compilers, select_compiler
 
     compilers = list(installed_compilers())
     if args.compiler:
@@ -297,18 +303,21 @@ def main(argv: Sequence[str] | None = None) -> int:
                 raise ValueError(f"--compiler: unknown compiler {c!r}; choose from {', '.join(COMPILERS)}")
         if args.models_only or len(compilers) == 1:
             select_compiler(compilers[0])
-    ensure_taichi("cpu")
+    if args.arch != "cpu":
+        check_arch(args.arch)  # one line, exit 2, where there is no such device
+    ensure_taichi(args.arch)
     models = parse_models(args.models or ("cdnf" if args.quick else "all"))
     if args.models_only:
         import json
         from dataclasses import asdict
 
-        rows = model_rows(models, bench_inputs(n, args.clip, resolutions), repeats, not args.no_reference)
+        rows = model_rows(models, bench_inputs(n, args.clip, resolutions), repeats, not args.no_reference,
+                          arch=args.arch)
         with open(args.models_only, "w") as f:
             json.dump([asdict(r) for r in rows], f)
         return 0
     rows = run_bench(models, n, repeats, args.clip, reference=not args.no_reference, resolutions=resolutions,
-                     compilers=compilers)
+                     compilers=compilers, arch=args.arch)
     print(format_table(rows))
     if args.startup:
         print()

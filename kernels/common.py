@@ -16,6 +16,24 @@ BORDER_CODES = {"replicate": REPLICATE, "reflect": REFLECT, "zero": ZERO}
 COLUMN_BLOCKS = 4
 
 
+def column_blocks(width: int, arch: str) -> int:
+    """Work items per row of the generic (row-run) kernels for frames ``width`` px wide.
+
+    On the CPU, :data:`COLUMN_BLOCKS` (each thread takes chunks of rows x blocks). On a
+    GPU, one item per :data:`CHUNK` columns, so that a 426x240 frame is 6480 GPU threads
+    rather than 960, each running one run of ``CHUNK`` columns (``block_span`` rounds a
+    block up to whole runs).
+
+    Parameters
+    ----------
+    width : int
+        Frame width (px).
+    arch : str
+        The runtime's arch (``"cpu"``, ``"cuda"``, ...), as ``ensure_taichi`` returns it.
+    """
+    return COLUMN_BLOCKS if arch == "cpu" else max(1, -(-int(width) // CHUNK))
+
+
 @ti.func
 def tanh_rational(x):
     """tanh via the [13/6] rational approximation (Eigen/XLA), |err| < 4e-7 in f32."""

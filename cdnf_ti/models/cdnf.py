@@ -33,19 +33,19 @@ class TaichiCDNFBackend:
     def __init__(self, params: CDNFParams, shape: tuple[int, int], arch: str = "cpu"):
         from ..taichi_runtime import ensure_taichi
 
-        ensure_taichi(arch)
+        arch = ensure_taichi(arch)  # the arch in use ("gpu" resolves to one)
         from ..taichi_runtime import dsl
 
         ti = dsl()
 
         from ..kernels import cdnf as K
-        from ..kernels.common import BORDER_CODES, COLUMN_BLOCKS
+        from ..kernels.common import BORDER_CODES, column_blocks
 
         self.K = K
         self.params = params
         self.shape = tuple(shape)
         self.mode = BORDER_CODES[params.border]
-        self.blocks = COLUMN_BLOCKS
+        self.blocks = column_blocks(self.shape[1], arch)  # work items per row
 
         def nd() -> "ti.Ndarray":
             return ti.ndarray(ti.f32, self.shape)

@@ -186,15 +186,15 @@ class TaichiLGMDBackend:
     CHANNEL_BUFFERS = 2
 
     def __init__(self, params: Any, shape: tuple[int, int], dt: int, arch: str = "cpu"):
-        ensure_taichi(arch)
+        arch = ensure_taichi(arch)  # the arch in use ("gpu" resolves to one)
         # lazy: kernels compile for the compiler/arch that ensure_taichi picks at run time
         from ..kernels import lgmd as K
-        from ..kernels.common import COLUMN_BLOCKS
+        from ..kernels.common import column_blocks
 
         self.K = K
         self.params = params
         self.shape = tuple(shape)
-        self.blocks = COLUMN_BLOCKS
+        self.blocks = column_blocks(self.shape[1], arch)  # work items per row
         self.dt = dt
         self._arrays: list[Any] = []
         self.L, self.P = self._nd(), self._nd()

@@ -157,16 +157,16 @@ class TaichiSDNFBackend:
     name = "taichi"
 
     def __init__(self, params: SDNFParams, shape: tuple[int, int], arch: str = "cpu"):
-        ensure_taichi(arch)
+        arch = ensure_taichi(arch)  # the arch in use ("gpu" resolves to one)
         ti = dsl()
 
         from ..kernels import sdnf as K
-        from ..kernels.common import COLUMN_BLOCKS
+        from ..kernels.common import column_blocks
 
         self.K = K
         self.params = params
         self.shape = tuple(shape)
-        self.blocks = COLUMN_BLOCKS
+        self.blocks = column_blocks(self.shape[1], arch)  # work items per row
         nd = lambda: ti.ndarray(ti.f32, self.shape)  # noqa: E731
         self.L, self.P, self.E, self.row1, self.row2 = nd(), nd(), nd(), nd(), nd()
         self.u = [nd(), nd()]
