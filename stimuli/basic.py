@@ -264,7 +264,7 @@ class BasicStimulus(FrameStream):
         f = np.full((self.height, self.width), self.background_value, dtype=np.float32)
         y0, y1, x0, x1 = self.box(k)
         if self.backend == "taichi":
-            K, blocks = taichi_stimulus_kernels()
+            K, blocks = taichi_stimulus_kernels(self.width)
             K.render_box(f, y0, y1, x0, x1, self.object_value, self.background_value, blocks)
             return f
         f[y0:y1, x0:x1] = self.object_value
@@ -274,14 +274,18 @@ class BasicStimulus(FrameStream):
         return asdict(self)
 
 
-def taichi_stimulus_kernels():
-    """``(cdnf_ti.kernels.stimuli, column blocks)``, initialising Taichi on first use."""
-    ensure_taichi(current_arch() or "cpu")
+def taichi_stimulus_kernels(width: int):
+    """``(cdnf_ti.kernels.stimuli, work items per row)`` for frames ``width`` px wide.
+
+    Initialises Taichi on first use (on the process's arch); the work items per row are
+    :func:`cdnf_ti.kernels.common.column_blocks` of that arch.
+    """
+    arch = ensure_taichi(current_arch() or "cpu")
     # lazy: kernels compile for the compiler/arch that ensure_taichi picks at run time
     from ..kernels import stimuli as K
-    from ..kernels.common import COLUMN_BLOCKS
+    from ..kernels.common import column_blocks
 
-    return K, COLUMN_BLOCKS
+    return K, column_blocks(width, arch)
 
 
 def check_seed(seed: object) -> int:

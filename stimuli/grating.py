@@ -148,7 +148,7 @@ class GratingStimulus(FrameStream):
         if self.backend == "numpy":
             return grating_numpy(self.height, self.width, sh, self.period, self.bar_width, self.vertical,
                                  self.bar_grey, self.background_grey)
-        K, blocks = taichi_stimulus_kernels()
+        K, blocks = taichi_stimulus_kernels(self.width)
         out = np.empty((self.height, self.width), dtype=np.float32)
         K.render_grating(out, sh, self.period, self.bar_width, int(self.vertical), self.bar_grey,
                          self.background_grey, blocks)

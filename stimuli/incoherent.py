@@ -46,8 +46,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-from ..taichi_runtime import current_arch, ensure_taichi
-from .basic import BASIC_STIMULI, BasicStimulus, basic_stimulus, check_seed
+from .basic import BASIC_STIMULI, BasicStimulus, basic_stimulus, check_seed, taichi_stimulus_kernels
 
 BACKGROUND, KEPT, DISPLACED, TARGET = 0, 1, 2, 3
 BACKENDS = ("taichi", "numpy")
@@ -156,13 +155,8 @@ class IncoherentStimulus:
                     f"pixels on any frame (raise the coherence or shrink the object)")
         self._kernels = None
         if backend == "taichi":
-            ensure_taichi(current_arch() or "cpu")
-            # lazy: kernels compile for the compiler/arch that ensure_taichi picks at run time
-            from ..kernels import stimuli as K
-            from ..kernels.common import COLUMN_BLOCKS
-
-            self._kernels = K
-            self._blocks = COLUMN_BLOCKS
+            # lazy: kernels compile for the compiler/arch that the runtime picks at run time
+            self._kernels, self._blocks = taichi_stimulus_kernels(base.width)
 
     # -- basic properties -------------------------------------------------
     @property

@@ -201,13 +201,13 @@ class _TaichiRain:
     """Per-shape Taichi buffers and kernels for the rain steps."""
 
     def __init__(self, shape: tuple[int, int], params: RainParams):
-        ensure_taichi(current_arch() or "cpu")
+        arch = ensure_taichi(current_arch() or "cpu")
         ti = dsl()  # taichi or quadrants, chosen at run time
 
         from ..kernels import stimuli as K
-        from ..kernels.common import COLUMN_BLOCKS
+        from ..kernels.common import column_blocks
 
-        self.K, self.blocks, self.shape = K, COLUMN_BLOCKS, shape
+        self.K, self.blocks, self.shape = K, column_blocks(shape[1], arch), shape
         self.layer = ti.ndarray(ti.f32, shape)
         self.tmp = ti.ndarray(ti.f32, shape)
         self.blurred = ti.ndarray(ti.f32, shape)
@@ -215,8 +215,8 @@ class _TaichiRain:
         self.g = ti.ndarray(ti.f32, g.shape)
         self.g.from_numpy(g)
         self.blur = g.size > 1
-        self.signal = np.zeros(shape[0] * COLUMN_BLOCKS, dtype=np.float64)
-        self.noise = np.zeros(shape[0] * COLUMN_BLOCKS, dtype=np.float64)
+        self.signal = np.zeros(shape[0] * self.blocks, dtype=np.float64)  # partial sums per work item
+        self.noise = np.zeros(shape[0] * self.blocks, dtype=np.float64)
 
     def layer_for(self, drops: Drops, params: RainParams) -> "object":
         self.K.fill(self.layer, 0.0)

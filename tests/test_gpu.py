@@ -6,7 +6,7 @@ there the child reports that no CUDA device exists and those two tests skip with
 (the one-line error for a missing GPU is tested here for the bench, and in
 ``test_compilers.py`` and ``test_cli.py``). On a machine with an NVIDIA GPU they run.
 
-What a GPU runs differently from the CPU is tested everywhere: the generic kernels with the
+What a GPU runs differently from the CPU is tested everywhere: the generic model and stimulus kernels with the
 GPU's work partition (one work item per run of 16 columns) run here on the CPU against the
 references.
 """
@@ -110,3 +110,32 @@ def test_the_gpu_work_partition_computes_the_reference_result(name, monkeypatch)
     ref = create_model(name, backend="numpy").run(frames)
     assert np.max(np.abs(got.output - ref.output)) < 1e-4
     assert np.array_equal(got.spike, ref.spike) and got.converged.all()
+
+
+def _stimulus_pairs():
+    """(taichi frames, numpy frames) of each procedural stimulus at 56 x 70 (five work items per row on a GPU)."""
+    from cdnf_ti.stimuli.basic import basic_stimulus
+    from cdnf_ti.stimuli.grating import GratingStimulus
+    from cdnf_ti.stimuli.incoherent import incoherent_stimulus
+    from cdnf_ti.stimuli.rain import RainParams, RainyFrames
+
+    size = dict(height=56, width=70)
+    yield "looming", *(list(basic_stimulus("dark_looming", backend=b, **size).frames()) for b in ("taichi", "numpy"))
+    yield "incoherent", *(list(incoherent_stimulus("dark_looming", 0.4, 3, backend=b, **size).frames())
+                          for b in ("taichi", "numpy"))
+    grating = dict(period=10, bar_width=3, speed=-77.0, seed=5, **size)
+    yield "grating", *(list(GratingStimulus(backend=b, **grating).frames()) for b in ("taichi", "numpy"))
+    video = [np.ascontiguousarray(f[::2, ::3][:56, :70]) for f in standin_video(3, seed=7)]
+    yield "rain", *(list(RainyFrames(video, RainParams(drops=60), seed=2, backend=b)) for b in ("taichi", "numpy"))
+
+
+def test_the_gpu_work_partition_renders_the_reference_stimuli(monkeypatch):
+    # the stimulus kernels with the GPU's work items, run here on the CPU, against the NumPy renderings
+    from cdnf_ti.kernels import common
+
+    cpu_blocks = common.column_blocks
+    monkeypatch.setattr(common, "column_blocks", lambda width, arch: cpu_blocks(width, "cuda"))
+    for name, got, ref in _stimulus_pairs():
+        assert len(got) == len(ref) > 1, name
+        for k, (a, b) in enumerate(zip(got, ref)):
+            np.testing.assert_allclose(a, b, atol=2e-6, err_msg=f"{name} frame {k}")
