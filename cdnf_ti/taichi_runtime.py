@@ -45,6 +45,8 @@ COMPILERS = ("taichi", "quadrants")
 COMPILER_ENV = "CDNF_TI_COMPILER"
 #: Environment variable naming the compile-cache folder (optional).
 CACHE_ENV = "CDNF_TI_CACHE_DIR"
+#: Environment variables sizing a process's CPU thread pool: taichi reads the first, quadrants the second.
+THREADS_ENV = ("TI_CPU_MAX_NUM_THREADS", "QD_CPU_MAX_NUM_THREADS")
 
 _lock = threading.Lock()
 
@@ -262,6 +264,16 @@ def ensure_taichi(arch: str = "cpu", compiler: str | None = None) -> str:
         _compiler, _module = name, ti
         init_seconds = time.perf_counter() - t0
         return _arch
+
+
+def limit_cpu_threads(threads: int) -> None:
+    """Give this process's CPU runtime ``threads`` pool threads, under either compiler.
+
+    Sets :data:`THREADS_ENV`, so it must run before the runtime starts (worker processes
+    call it first); child processes inherit it.
+    """
+    for name in THREADS_ENV:
+        os.environ[name] = str(max(1, int(threads)))
 
 
 def dsl() -> ModuleType:

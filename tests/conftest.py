@@ -7,6 +7,15 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
+# Under pytest-xdist (`-n auto`: one worker process per core) each worker gets cores / workers
+# pool threads, so the workers' kernels do not oversubscribe the cores (the project's own
+# parallel runners do the same). Set before any runtime starts; an explicit setting wins.
+if os.environ.get("PYTEST_XDIST_WORKER_COUNT"):
+    from cdnf_ti.taichi_runtime import THREADS_ENV, limit_cpu_threads
+
+    if not any(os.environ.get(name) for name in THREADS_ENV):
+        limit_cpu_threads((os.cpu_count() or 1) // int(os.environ["PYTEST_XDIST_WORKER_COUNT"]))
+
 # the shared material next to the repository, or where $CDNF_TI_SHARED points
 SHARED_REAL = Path(os.environ.get("CDNF_TI_SHARED", REPO.parent / "shared")) / "data" / "real"
 

@@ -107,3 +107,18 @@ def test_kernel_modules_take_their_dsl_from_the_runtime():
     for mod in (cdnf, common, lgmd, sdnf, stimuli):
         assert mod.ti is dsl()
     assert np.isfinite(float(cdnf.MAX_STEPS))
+
+
+@pytest.mark.parametrize("compiler", installed_compilers())
+def test_limit_cpu_threads_sizes_the_pool_under_each_compiler(compiler):
+    # taichi reads TI_CPU_MAX_NUM_THREADS, quadrants QD_CPU_MAX_NUM_THREADS: worker processes set both
+    from cdnf_ti.taichi_runtime import THREADS_ENV
+
+    code = ("from cdnf_ti.taichi_runtime import cpu_threads, ensure_taichi, limit_cpu_threads\n"
+            "limit_cpu_threads(3)\nensure_taichi('cpu')\nprint(cpu_threads())")
+    env = {k: v for k, v in os.environ.items() if k not in THREADS_ENV}
+    env[COMPILER_ENV] = compiler
+    proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.split()[-1] == "3"

@@ -24,7 +24,7 @@ from typing import Any, Callable, Iterator, Sequence
 from tqdm import tqdm
 
 from ..errors import UserError
-from ..taichi_runtime import current_arch, ensure_taichi
+from ..taichi_runtime import current_arch, ensure_taichi, limit_cpu_threads
 
 
 class TaskFailed(Exception):
@@ -49,11 +49,11 @@ def init_worker(arch: str | None = "cpu", threads: int | None = None) -> None:
     arch : str or None
         Taichi architecture; None: the tasks do not use Taichi (nothing to initialise).
     threads : int, optional
-        Taichi CPU thread-pool size for this process (``TI_CPU_MAX_NUM_THREADS``);
-        None leaves Taichi's default (all cores).
+        CPU thread-pool size for this process (:func:`~cdnf_ti.taichi_runtime.limit_cpu_threads`,
+        for either compiler); None leaves the compiler's default (all cores).
     """
     if current_arch() is None and threads:
-        os.environ["TI_CPU_MAX_NUM_THREADS"] = str(int(threads))
+        limit_cpu_threads(threads)
     if arch is not None:
         ensure_taichi(arch)
 
