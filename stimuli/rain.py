@@ -29,8 +29,8 @@ from typing import Iterable, Iterator
 import numpy as np
 
 from ..frames import to_grey
-from ..taichi_runtime import current_arch, dsl, ensure_taichi
-from .basic import check_seed
+from ..taichi_runtime import dsl
+from .basic import check_seed, taichi_stimulus_kernels
 
 #: The paper's frame size for 500 droplets per frame (height, width).
 REFERENCE_SHAPE = (240, 426)
@@ -201,13 +201,9 @@ class _TaichiRain:
     """Per-shape Taichi buffers and kernels for the rain steps."""
 
     def __init__(self, shape: tuple[int, int], params: RainParams):
-        arch = ensure_taichi(current_arch() or "cpu")
+        self.K, self.blocks = taichi_stimulus_kernels(shape[1])  # starts the runtime on first use
+        self.shape = shape
         ti = dsl()  # taichi or quadrants, chosen at run time
-
-        from ..kernels import stimuli as K
-        from ..kernels.common import column_blocks
-
-        self.K, self.blocks, self.shape = K, column_blocks(shape[1], arch), shape
         self.layer = ti.ndarray(ti.f32, shape)
         self.tmp = ti.ndarray(ti.f32, shape)
         self.blurred = ti.ndarray(ti.f32, shape)

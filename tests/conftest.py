@@ -11,10 +11,11 @@ REPO = Path(__file__).resolve().parents[1]
 # pool threads, so the workers' kernels do not oversubscribe the cores (the project's own
 # parallel runners do the same). Set before any runtime starts; an explicit setting wins.
 if os.environ.get("PYTEST_XDIST_WORKER_COUNT"):
+    from cdnf_ti.experiments.parallel import taichi_threads_per_worker
     from cdnf_ti.taichi_runtime import THREADS_ENV, limit_cpu_threads
 
     if not any(os.environ.get(name) for name in THREADS_ENV):
-        limit_cpu_threads((os.cpu_count() or 1) // int(os.environ["PYTEST_XDIST_WORKER_COUNT"]))
+        limit_cpu_threads(taichi_threads_per_worker(int(os.environ["PYTEST_XDIST_WORKER_COUNT"])))
 
 # the shared material next to the repository, or where $CDNF_TI_SHARED points
 SHARED_REAL = Path(os.environ.get("CDNF_TI_SHARED", REPO.parent / "shared")) / "data" / "real"
