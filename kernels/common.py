@@ -1,6 +1,6 @@
 """Shared Taichi helpers: border handling, rational tanh, work partitioning."""
 
-from ..taichi_runtime import dsl
+from ..taichi_runtime import current_compiler, dsl
 
 ti = dsl()  # taichi or quadrants: the same DSL
 
@@ -262,9 +262,15 @@ def fill(x: F2, value: ti.f32):
 # the frame (replicate/reflect copies, or 0), refreshed by the thread that
 # wrote the row, so the stencils read neighbours without any clamping.
 # Horizontal neighbours are lane shifts of three consecutive elements.
+#
+# The lane count suits the compiler (docs/PERFORMANCE.md, round 7): taichi 1.7.4
+# runs the C-DNF contrast update 17 % faster with 32 lanes than with 16 (Zen 3,
+# AVX2), quadrants 1.3.3 runs C-DNF 22 % slower with 32; both ran slower with 8.
 # ---------------------------------------------------------------------------
 
-LANES = 16
+#: Lanes per vector element of the fast path, per compiler.
+LANES_BY_COMPILER = {"taichi": 32, "quadrants": 16}
+LANES = LANES_BY_COMPILER.get(current_compiler() or "", 16)
 
 
 def lane_layout(width: int) -> tuple[int, int]:

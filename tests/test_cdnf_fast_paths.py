@@ -13,7 +13,7 @@ from conftest import small_stimulus
 
 from cdnf_ti import CDNF, CDNFParams
 from cdnf_ti.bench.inputs import standin_video
-from cdnf_ti.kernels.cdnf import EMPTY_HI
+from cdnf_ti.kernels.cdnf import EMPTY_HI, LANES
 from cdnf_ti.models.cdnf import LaneTaichiCDNFBackend, TaichiCDNFBackend
 from cdnf_ti.reference import NumpyCDNFBackend
 from cdnf_ti.stimuli.basic import basic_stimulus
@@ -34,7 +34,7 @@ def _assert_fields_close(fast, ref, atol):
 
 
 @pytest.mark.parametrize("border", BORDERS)
-@pytest.mark.parametrize("width", [80, 83])
+@pytest.mark.parametrize("width", [5 * LANES, 5 * LANES + 3])  # a multiple of the lane width, and not
 def test_one_contrast_and_one_summation_update_match_reference(border, width):
     # Two frames of a light looming square: strong ON/OFF contrast next to the borders.
     stim = small_stimulus("light_looming", size=width)
@@ -273,3 +273,19 @@ def test_fields_read_right_after_load_show_the_new_frame():
     model._be.load(frames[1], False)
     p = model._be.fields()["P"]
     assert np.allclose(p, frames[1].astype(np.float64) / 255.0 - frames[0] / 255.0, atol=1e-6)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.float32])
+def test_the_backend_prepares_its_contrast_launch_for_the_first_frames_type(dtype):
+    # warm_up compiles the contrast launch for one frame type (each variant costs start-up time):
+    # the first frame's, so 8-bit video and float frames both start with what they need
+    video = [f[::2, ::3] for f in standin_video(4, seed=7)]  # uint8
+    as_float = [(f / 255.0).astype(np.float32) for f in video]
+    model, floats = CDNF(), CDNF()
+    frames = video if dtype == np.uint8 else as_float
+    model._make_backend(frames[0].shape, frames[0].dtype)  # what the first step does
+    assert model._be._idle_frame.dtype == dtype  # set before the backend's warm-up
+    a = [model.step(f).output for f in frames][1:]
+    floats.step(as_float[0])
+    b = [floats.step(f).output for f in as_float[1:]]
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-6)

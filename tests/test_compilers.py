@@ -122,3 +122,16 @@ def test_limit_cpu_threads_sizes_the_pool_under_each_compiler(compiler):
                           timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert proc.stdout.split()[-1] == "3"
+
+
+@pytest.mark.parametrize("compiler", installed_compilers())
+def test_the_lane_width_of_the_fast_path_suits_the_compiler(compiler):
+    # taichi runs the lane kernels fastest with 32 lanes, quadrants with 16 (docs/PERFORMANCE.md, round 7)
+    code = ("from cdnf_ti.taichi_runtime import ensure_taichi\nensure_taichi('cpu')\n"
+            "from cdnf_ti.kernels import cdnf, common, lgmd\nprint(common.LANES, cdnf.LANES, lgmd.LANES)")
+    env = dict(os.environ, **{COMPILER_ENV: compiler})
+    proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    want = {"taichi": 32, "quadrants": 16}[compiler]
+    assert proc.stdout.split()[-3:] == [str(want)] * 3

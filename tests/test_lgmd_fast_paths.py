@@ -16,6 +16,7 @@ from test_flgmd import noisy_stream
 from test_row_runs import moving_noise
 
 from cdnf_ti.bench.inputs import real_or_standin, standin_video
+from cdnf_ti.kernels.common import LANES
 from cdnf_ti.models import FLGMDParams, create_model
 from cdnf_ti.models.flgmd import LaneTaichiFLGMDBackend, TaichiFLGMDBackend
 from cdnf_ti.models.lgmd2 import LaneTaichiLGMD2Backend, TaichiLGMD2Backend
@@ -46,9 +47,10 @@ def assert_fields_close(fast, ref, rel=1e-4):
         np.testing.assert_allclose(fa[k], fb[k], atol=rel * scale, rtol=0, err_msg=k)
 
 
-# 33: two lanes and one column; 48: whole lanes only; 70: the width the other tests use (each width
-# compiles the kernels once, so the other tests share 70, and the real clip 426).
-@pytest.mark.parametrize("width", [33, 48, 70])
+# two lane elements and one column; whole lane elements only; 70: the width the other tests use (each
+# width compiles the kernels once, so the other tests share 70, and the real clip 426). The lane
+# width depends on the compiler (kernels.common.LANES_BY_COMPILER).
+@pytest.mark.parametrize("width", [2 * LANES + 1, 3 * LANES, 70])
 @pytest.mark.parametrize("model", FAST_MODELS)
 def test_fast_path_matches_reference_at_widths_around_the_lane_width(model, width):
     frames = moving_noise(7, width, seed=width, n=7)

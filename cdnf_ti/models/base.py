@@ -338,16 +338,22 @@ class Model:
         """Grey (H, W) frame; builds the backend at the first frame, then checks the size."""
         grey = to_grey(frame)
         if self._be is None:
-            self._make_backend(grey.shape)
+            self._make_backend(grey.shape, grey.dtype)
         elif grey.shape != self._be.shape:
             raise ValueError(f"frame {self._t} is {grey.shape[1]}x{grey.shape[0]} but this model runs at "
                              f"{self._be.shape[1]}x{self._be.shape[0]}; call reset() on a new model")
         return grey
 
-    def _make_backend(self, shape: tuple[int, int]) -> ModelBackend:
-        """Build the backend for frames of ``shape`` (H, W) and make it this model's."""
+    def _make_backend(self, shape: tuple[int, int], dtype: np.dtype | None = None) -> ModelBackend:
+        """Build the backend for frames of ``shape`` (H, W) and make it this model's.
+
+        ``dtype``: the first frame's (uint8 or float); a backend with an ``expect_frames``
+        method is told it before :meth:`_init_backend`, so it prepares (compiles) for those.
+        """
         make = self._taichi_backend if self.backend_name == "taichi" else self._numpy_backend
         backend = make(tuple(shape))
+        if dtype is not None and hasattr(backend, "expect_frames"):
+            backend.expect_frames(np.dtype(dtype))
         with getattr(backend, "lock", None) or contextlib.nullcontext():
             self._init_backend(backend)
         self._be = backend

@@ -315,11 +315,18 @@ class LaneTaichiCDNFBackend:
         ws.all_active()
         self._s_ready, self._mean = False, None
 
+    def expect_frames(self, dtype: np.dtype) -> None:
+        """Frames will be of ``dtype`` (uint8 video or float): :meth:`warm_up` compiles the contrast
+        launch for those (a frame of the other kind compiles its variant when it first comes)."""
+        self._idle_frame = np.zeros((1, 1), dtype)
+
     def warm_up(self) -> None:
-        """Compile every kernel of a frame now, not mid-run (``lam = mom = 0`` changes no value)."""
-        for dtype in (np.uint8, np.float32):  # the contrast launch for 8-bit (video) and float frames
-            self._idle_frame = np.zeros((1, 1), dtype)
-            self.contrast_iterate_many([(0.0, 0.0)])
+        """Compile every kernel of a frame now, not mid-run (``lam = mom = 0`` changes no value).
+
+        The contrast launch is compiled for the frame type of :meth:`expect_frames` (default
+        float32) only: each variant costs about a second of start-up even with a warm cache.
+        """
+        self.contrast_iterate_many([(0.0, 0.0)])
         self._s_ready = False
         self.summation_input()  # the stand-alone kernel too
         self.summation_iterate_many([(0.0, 0.0)])
