@@ -270,7 +270,7 @@ def fill(x: F2, value: ti.f32):
 
 #: Lanes per vector element of the fast path, per compiler.
 LANES_BY_COMPILER = {"taichi": 32, "quadrants": 16}
-LANES = LANES_BY_COMPILER.get(current_compiler() or "", 16)
+LANES = LANES_BY_COMPILER[current_compiler()]  # the runtime is running: ti = dsl() above
 
 
 def lane_layout(width: int) -> tuple[int, int]:

@@ -182,6 +182,9 @@ class ModelBackend(Protocol):
     def fields(self) -> dict[str, np.ndarray]:
         """The inner layers, (H, W) each."""
 
+    # Optional: ``expect_frames(dtype)``, told the first frame's dtype before the model's
+    # ``_init_backend`` (C-DNF's lane backend compiles its frame kernel for that type only).
+
 
 @runtime_checkable
 class Sweepable(Protocol):

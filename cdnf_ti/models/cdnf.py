@@ -297,8 +297,7 @@ class LaneTaichiCDNFBackend:
         scale = 1.0 / 255.0 if grey.dtype == np.uint8 else 1.0
         self._s_ready, self._mean = False, None
         self._frame_in = (grey, scale, int(first))
-        if grey.dtype != self._idle_frame.dtype:
-            self._idle_frame = np.zeros((1, 1), grey.dtype)
+        self.expect_frames(grey.dtype)
 
     def _flush_load(self) -> None:
         """Load the frame taken by :meth:`load` now (its fields are needed before the contrast launch)."""
@@ -318,7 +317,8 @@ class LaneTaichiCDNFBackend:
     def expect_frames(self, dtype: np.dtype) -> None:
         """Frames will be of ``dtype`` (uint8 video or float): :meth:`warm_up` compiles the contrast
         launch for those (a frame of the other kind compiles its variant when it first comes)."""
-        self._idle_frame = np.zeros((1, 1), dtype)
+        if self._idle_frame.dtype != dtype:  # the launch's frame argument when it loads none
+            self._idle_frame = np.zeros((1, 1), dtype)
 
     def warm_up(self) -> None:
         """Compile every kernel of a frame now, not mid-run (``lam = mom = 0`` changes no value).
