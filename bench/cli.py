@@ -275,6 +275,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--models-only", default=None, metavar="JSON", help=argparse.SUPPRESS)  # child process mode
     ap.add_argument("--startup", action="store_true",
                     help="also measure start-up (process start to the first frame) with a cold and a warm cache")
+    ap.add_argument("--simd", action="store_true",
+                    help="also report how wide the vector code is that each compiler makes of C-DNF's update loops")
     args = ap.parse_args(argv)
     n = args.frames if args.frames is not None else (6 if args.quick else 30)
     if n < 3:
@@ -322,6 +324,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.startup:
         print()
         print(format_startup(measure_startup(compilers)))
+    if args.simd:
+        from .simd import format_simd, measure_simd
+
+        print()
+        print(format_simd(measure_simd(compilers, progress=True)))
     return 0
 
 

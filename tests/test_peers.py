@@ -76,6 +76,28 @@ def test_bench_command_prints_one_row_per_model_and_peer(capsys):
     assert all(c in out for c in installed_compilers())
 
 
+def test_bench_command_appends_the_simd_report_when_asked(capsys, monkeypatch):
+    import collections
+
+    from cdnf_ti.bench import simd
+    from cdnf_ti.run import main
+    from cdnf_ti.taichi_runtime import current_compiler
+
+    asked = []
+
+    def fake_measure(compilers, progress=False):  # the real one compiles afresh per compiler (tests/test_compilers.py)
+        asked.append(list(compilers))
+        return [(c, "ON/OFF contrast solve", collections.Counter({1: 1, 8: 3})) for c in compilers]
+
+    monkeypatch.setattr(simd, "measure_simd", fake_measure)
+    here = current_compiler()
+    rc = main(["bench", "--quick", "--frames", "3", "--sizes", "48x40", "--no-reference", "--compiler", here,
+               "--simd"])
+    out = capsys.readouterr().out
+    assert rc == 0 and asked == [[here]]
+    assert f"| {here} | ON/OFF contrast solve | 75 % | scalar: 1, 8 lanes: 3 |" in out.splitlines()
+
+
 def test_bench_command_rejects_a_missing_clip_with_one_line(capsys):
     from cdnf_ti.run import main
 
