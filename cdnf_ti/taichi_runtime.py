@@ -45,6 +45,8 @@ COMPILERS = ("taichi", "quadrants")
 COMPILER_ENV = "CDNF_TI_COMPILER"
 #: Environment variable naming the compile-cache folder (optional).
 CACHE_ENV = "CDNF_TI_CACHE_DIR"
+#: Environment variable overriding the fast path's lanes per vector (optional; ``kernels.common.lane_count``).
+LANES_ENV = "CDNF_TI_LANES"
 #: Environment variables sizing a process's CPU thread pool: taichi reads the first, quadrants the second.
 THREADS_ENV = ("TI_CPU_MAX_NUM_THREADS", "QD_CPU_MAX_NUM_THREADS")
 

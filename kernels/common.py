@@ -1,6 +1,9 @@
 """Shared Taichi helpers: border handling, rational tanh, work partitioning."""
 
-from ..taichi_runtime import current_compiler, dsl
+import os
+
+from ..errors import UserError
+from ..taichi_runtime import LANES_ENV, current_compiler, dsl
 
 ti = dsl()  # taichi or quadrants: the same DSL
 
@@ -266,11 +269,33 @@ def fill(x: F2, value: ti.f32):
 # The lane count suits the compiler (docs/PERFORMANCE.md, round 7): taichi 1.7.4
 # runs the C-DNF contrast update 17 % faster with 32 lanes than with 16 (Zen 3,
 # AVX2), quadrants 1.3.3 runs C-DNF 22 % slower with 32; both ran slower with 8.
+# $CDNF_TI_LANES overrides it, to measure and tune the layout on another CPU.
 # ---------------------------------------------------------------------------
 
 #: Lanes per vector element of the fast path, per compiler.
 LANES_BY_COMPILER = {"taichi": 32, "quadrants": 16}
-LANES = LANES_BY_COMPILER[current_compiler()]  # the runtime is running: ti = dsl() above
+#: The lane counts ``$CDNF_TI_LANES`` may choose (to tune the layout on another CPU).
+LANE_CHOICES = (8, 16, 32)
+
+
+def lane_count(compiler: str) -> int:
+    """Lanes per vector element for ``compiler``: ``$CDNF_TI_LANES`` when set, else the measured default.
+
+    Raises
+    ------
+    UserError
+        ``$CDNF_TI_LANES`` is not one of :data:`LANE_CHOICES`.
+    """
+    raw = os.environ.get(LANES_ENV, "").strip()
+    if not raw:
+        return LANES_BY_COMPILER[compiler]
+    if raw not in {str(n) for n in LANE_CHOICES}:
+        raise UserError(f"${LANES_ENV}={raw!r}: lanes per vector must be one of "
+                        f"{', '.join(map(str, LANE_CHOICES))} (unset: {LANES_BY_COMPILER[compiler]} under {compiler})")
+    return int(raw)
+
+
+LANES = lane_count(current_compiler())  # the runtime is running: ti = dsl() above
 
 
 def lane_layout(width: int) -> tuple[int, int]:

@@ -10,6 +10,7 @@ import pytest
 from cdnf_ti.taichi_runtime import (
     COMPILER_ENV,
     COMPILERS,
+    LANES_ENV,
     current_compiler,
     ensure_taichi,
     installed_compilers,
@@ -130,11 +131,45 @@ def test_the_lane_width_of_the_fast_path_suits_the_compiler(compiler):
     code = ("from cdnf_ti.taichi_runtime import ensure_taichi\nensure_taichi('cpu')\n"
             "from cdnf_ti.kernels import cdnf, common, lgmd\nprint(common.LANES, cdnf.LANES, lgmd.LANES)")
     env = dict(os.environ, **{COMPILER_ENV: compiler})
+    env.pop(LANES_ENV, None)
     proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     want = {"taichi": 32, "quadrants": 16}[compiler]
     assert proc.stdout.split()[-3:] == [str(want)] * 3
+
+
+_LANES_CHILD = """
+import numpy as np
+from cdnf_ti import CDNF
+from cdnf_ti.bench.inputs import standin_video
+from cdnf_ti.kernels import common
+from cdnf_ti.models.cdnf import LaneTaichiCDNFBackend
+frames = [f[::2, ::2] for f in standin_video(6, seed=2)]
+fast = CDNF()
+a = fast.run(frames)
+b = CDNF(backend="numpy").run(frames)
+print(common.LANES, isinstance(fast._be, LaneTaichiCDNFBackend), np.max(np.abs(a.output - b.output)))
+"""
+
+
+def test_the_lane_count_can_be_set_for_another_cpu_and_gives_the_same_output():
+    compiler = current_compiler()
+    env = dict(os.environ, **{COMPILER_ENV: compiler, LANES_ENV: "8"})  # not the default of either compiler
+    proc = subprocess.run([sys.executable, "-c", _LANES_CHILD], cwd=REPO, env=env, capture_output=True, text=True,
+                          timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    lanes, lane_path, max_diff = proc.stdout.split()[-3:]
+    assert (lanes, lane_path) == ("8", "True")
+    assert float(max_diff) < 1e-4  # same equations on dashcam-like video, against the float64 reference
+
+
+def test_an_unsupported_lane_count_is_a_one_line_error(tmp_path):
+    env = dict(os.environ, **{LANES_ENV: "12"})
+    proc = subprocess.run([sys.executable, "-m", "cdnf_ti.run", "demo", "--size", "64"], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2
+    assert proc.stderr.startswith(f"error: ${LANES_ENV}='12':") and proc.stderr.count("\n") == 1
 
 
 _IR = """
