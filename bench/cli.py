@@ -253,10 +253,13 @@ def format_table(rows: Sequence[BenchRow]) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m cdnf_ti.run bench``."""
+    from ..cli_common import ArgumentParser
+    from ..errors import UserError
+    from ..limits import check_frame_size
     from ..run import parse_models
     from ..taichi_runtime import ARCHS, COMPILERS, check_arch, ensure_taichi, installed_compilers, select_compiler
 
-    ap = argparse.ArgumentParser(prog="python -m cdnf_ti.run bench",
+    ap = ArgumentParser(prog="python -m cdnf_ti.run bench",
                                  description="Throughput table: every model, C-DNF against its peers "
                                              "(SciPy, OpenCV+NumPy, PyTorch if installed), same run.")
     ap.add_argument("--quick", action="store_true", help="few frames, one repeat, C-DNF only (under a minute)")
@@ -280,29 +283,33 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = ap.parse_args(argv)
     n = args.frames if args.frames is not None else (6 if args.quick else 30)
     if n < 3:
-        raise ValueError(f"--frames must be >= 3, got {n}")
+        raise UserError(f"--frames must be >= 3, got {n}")
     repeats = args.repeats if args.repeats is not None else (1 if args.quick else 3)
     if repeats < 1:
-        raise ValueError(f"--repeats must be >= 1, got {repeats}")
+        raise UserError(f"--repeats must be >= 1, got {repeats}")
     resolutions = RESOLUTIONS
-    if args.sizes:
+    if args.sizes is not None:
         try:
             resolutions = tuple((int(h), int(w)) for w, h in (s.lower().split("x") for s in args.sizes.split(",")))
         except ValueError:
-            raise ValueError(f"--sizes must look like 426x240,600x600; got {args.sizes!r}") from None
+            raise UserError(f"--sizes must look like 426x240,600x600; got {args.sizes!r}") from None
         if any(h < 8 or w < 8 for h, w in resolutions):
-            raise ValueError(f"--sizes: frames must be at least 8x8, got {args.sizes!r}")
+            raise UserError(f"--sizes: frames must be at least 8x8, got {args.sizes!r}")
+        for h, w in resolutions:  # one line now, not an out-of-memory kill later
+            check_frame_size(h, w, what=f"--sizes {w}x{h}")
     if args.clip is not None:
         from ..frames import open_source
 
         open_source(args.clip)  # raises InputError with a one-line message
 
     compilers = list(installed_compilers())
-    if args.compiler:
+    if args.compiler is not None:
         compilers = [c.strip().lower() for c in args.compiler.split(",") if c.strip()]
         for c in compilers:
             if c not in COMPILERS:
-                raise ValueError(f"--compiler: unknown compiler {c!r}; choose from {', '.join(COMPILERS)}")
+                raise UserError(f"--compiler: unknown compiler {c!r}; choose from {', '.join(COMPILERS)}")
+        if not compilers:
+            raise UserError(f"--compiler names no compiler: got {args.compiler!r}")
         if args.models_only or len(compilers) == 1:
             select_compiler(compilers[0])
     if args.arch != "cpu":

@@ -19,6 +19,16 @@ from .taichi_runtime import COMPILERS, check_arch, select_compiler
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 
+class ArgumentParser(argparse.ArgumentParser):
+    """The subcommands' parser: a bad option is one ``error:`` line and exit 2, like every user error.
+
+    (argparse's own ``error`` prints the whole usage block first.)
+    """
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(EXIT_USAGE, f"error: {message} (see {self.prog} --help)\n")
+
+
 def add_model_options(ap: argparse.ArgumentParser, default_models: str = "cdnf") -> None:
     """Options shared by every command that runs models."""
     ap.add_argument("--model", "--models", dest="models", default=default_models,
@@ -100,11 +110,11 @@ def parse_models(spec: str) -> list[str]:
         return list(MODELS)
     names = [s.strip() for s in spec.split(",") if s.strip()]
     if not names:
-        raise UserError("no model named")
+        raise UserError(f"--model names no model: got {spec!r}")
     try:
         return list(dict.fromkeys(get_model_class(n).name for n in names))
     except ValueError as e:
-        raise UserError(str(e)) from None
+        raise UserError(f"--model: {e}") from None
 
 
 def unique_names(paths: Sequence[str], names: Sequence[str]) -> list[str]:

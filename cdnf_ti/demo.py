@@ -1,14 +1,13 @@
 """Built-in demo: every model on the six basic stimuli, printed next to the paper's Table I."""
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 import time
 import warnings
 from typing import Sequence
 
-from .cli_common import add_model_options, check_model_options, parse_models
+from .cli_common import ArgumentParser, add_model_options, check_model_options, parse_models
 from .limits import check_frame_size
 from .models import create_model
 from .models.base import NotConvergedWarning
@@ -67,7 +66,7 @@ def format_table1(result: dict[str, dict[str, dict]]) -> str:
 
 
 def main(argv: Sequence[str] = ()) -> int:
-    ap = argparse.ArgumentParser(prog="python -m cdnf_ti.run demo",
+    ap = ArgumentParser(prog="python -m cdnf_ti.run demo",
                                  description="Basic selectivity (paper Table I) on the six basic stimuli.")
     add_model_options(ap, default_models="cdnf")
     ap.add_argument("--size", type=int, default=600, help="frame size in px (default: %(default)s, as the paper)")

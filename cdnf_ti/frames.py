@@ -226,6 +226,8 @@ def open_npy(path: str | os.PathLike, fps: float | None = None, color_order: str
     try:
         arr = np.load(path, mmap_mode="r", allow_pickle=False)
     except Exception as e:  # noqa: BLE001 - any failure here is a bad file
+        if "allow_pickle" in str(e):  # numpy's wording for any file that is not a plain .npy array
+            raise InputError(path, "not a NumPy .npy array file (np.save of a (T, H, W) array)") from None
         raise InputError(path, f"cannot read as a NumPy array ({type(e).__name__}: {e})".splitlines()[0]) from None
     if arr.ndim not in (3, 4) or (arr.ndim == 4 and arr.shape[3] not in (1, 3)):
         raise InputError(path, f"array must be (T, H, W) or (T, H, W, 3); got shape {arr.shape}")

@@ -20,7 +20,7 @@ from typing import Sequence
 
 from . import __version__
 from .atomic import prepare_output
-from .cli_common import drops_arg, positive_float, seed_arg
+from .cli_common import ArgumentParser, drops_arg, positive_float, seed_arg
 from .errors import OutputError, UserError
 from .frames import iter_grey
 from .inputs import resolve_input
@@ -46,7 +46,7 @@ def rain_params_from_args(args: argparse.Namespace):
 
 def generate_main(argv: Sequence[str]) -> int:
     """``generate NAME ... --out PATH``: write one (incoherent, optionally rainy) basic stimulus."""
-    ap = argparse.ArgumentParser(prog="python -m cdnf_ti.run generate",
+    ap = ArgumentParser(prog="python -m cdnf_ti.run generate",
                                  description="Generate a basic or incoherent stimulus to a lossless file "
                                              "(FFV1 .avi, or a PNG folder) with a JSON sidecar.")
     ap.add_argument("name", choices=BASIC_STIMULI, metavar="NAME", help=f"one of: {', '.join(BASIC_STIMULI)}")
@@ -113,7 +113,7 @@ def generate_main(argv: Sequence[str]) -> int:
 
 def rain_main(argv: Sequence[str]) -> int:
     """``rain VIDEO... --out DIR``: add synthetic rain to videos; print each video's SNR."""
-    ap = argparse.ArgumentParser(prog="python -m cdnf_ti.run rain",
+    ap = ArgumentParser(prog="python -m cdnf_ti.run rain",
                                  description="Add synthetic rain (paper, Sec. III-A-2) to videos; write lossless "
                                              "DIR/<clip>_rain.avi (or PNG folders) plus JSON sidecars with the SNR.")
     ap.add_argument("inputs", nargs="+", metavar="VIDEO", help="video file, image folder, .npy, or stim:NAME?...")

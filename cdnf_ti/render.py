@@ -11,7 +11,6 @@ Frames are drawn with OpenCV (no matplotlib per frame) and written by
 """
 from __future__ import annotations
 
-import argparse
 import sys
 import warnings
 from pathlib import Path
@@ -21,7 +20,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from .cli_common import EXIT_OK, add_model_options, parse_models
+from .cli_common import EXIT_OK, ArgumentParser, add_model_options, parse_models
 from .errors import UserError
 from .experiments.labels import find_clip
 from .experiments.layout import trace_path
@@ -197,9 +196,13 @@ def render_video(source: str | Path, model_name: str, out: str | Path, params: A
     ------
     InputError
         Unreadable input, or a video the codec cannot write.
+    UserError
+        ``window`` ends past the input's last frame.
     """
     codec_for(out)  # a bad suffix fails before any work
     src = resolve_input(source)
+    if window is not None and src.n_frames and window[1] >= src.n_frames:
+        raise UserError(f"{source}: window {window[0]}:{window[1]} lies past the last frame ({src.n_frames - 1})")
     model = create_model(model_name, params, backend=backend, arch=arch, fps=src.fps)
     frames = render_frames(model, iter_grey(src), src.fps, src.n_frames, window, progress)
     return write_video(out, frames, src.fps)
@@ -207,7 +210,7 @@ def render_video(source: str | Path, model_name: str, out: str | Path, params: A
 
 def render_main(argv: Sequence[str]) -> int:
     """``python -m cdnf_ti.run render VIDEO --model cdnf --out movie.mp4``."""
-    ap = argparse.ArgumentParser(
+    ap = ArgumentParser(
         prog="python -m cdnf_ti.run render",
         description="Write a field movie: the input, the model's ON, OFF and Summation fields (colour-mapped) "
                     "and its output trace with threshold and alert, side by side.")
@@ -227,6 +230,8 @@ def render_main(argv: Sequence[str]) -> int:
             a, b = (int(x) for x in args.window.split(":"))
         except ValueError:
             raise UserError(f"--window must be START:END in frames, got {args.window!r}") from None
+        if not 0 <= a <= b:
+            raise UserError(f"--window needs 0 <= START <= END (frames, inclusive), got {args.window!r}")
         window = (a, b)
     out = Path(args.out) if args.out else Path(f"{Path(str(args.input)).stem}.{models[0]}.mp4")
     n = render_video(args.input, models[0], out, backend=args.backend, arch=args.arch, window=window,

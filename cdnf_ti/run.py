@@ -35,6 +35,7 @@ from .cli_common import (
     EXIT_INTERRUPTED as EXIT_INTERRUPTED,
     EXIT_OK as EXIT_OK,
     EXIT_USAGE as EXIT_USAGE,
+    ArgumentParser,
     add_model_options as add_model_options,
     check_model_options as check_model_options,
     drops_arg as drops_arg,
@@ -53,6 +54,7 @@ from .models import create_model
 from .models.base import NotConvergedWarning, run_models
 from .params import CDNFParams
 from .stimuli.rain import RainParams, RainyFrames
+from .taichi_runtime import lanes_override
 
 #: Subcommands: first word on the command line -> "module:function(argv) -> int".
 SUBCOMMANDS: dict[str, str] = {
@@ -66,7 +68,7 @@ SUBCOMMANDS: dict[str, str] = {
 }
 
 def _videos_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
+    ap = ArgumentParser(
         prog="python -m cdnf_ti.run",
         description="Run looming models on videos (files, image folders, .npy arrays). "
                     "With no arguments: the built-in demo (paper Table I). "
@@ -136,6 +138,8 @@ def _run_videos(args, models: list[str], params, out: Path, write_text) -> int:
             problem = e.problem if isinstance(e, InputError) else str(e)
             summary.append({"_i": index, "clip": Path(str(path)).stem, "model": ",".join(models),
                             "status": f"error: {problem}"})
+    if not sources:  # nothing could be opened: leave the output folder (and a summary of an earlier run) as it was
+        return EXIT_USAGE
     names = unique_names([str(p) for p, _ in sources], [src.name for _, src in sources])
     dup = [(p, n) for (p, src), n in zip(sources, names) if n != src.name]
     if dup:
@@ -229,6 +233,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         exit_on_second_interrupt(True)
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
+        lanes_override()  # a bad $CDNF_TI_LANES is one line now, not one error per clip later
         if not argv:
             return _load(SUBCOMMANDS["demo"])([])
         if argv[0] in SUBCOMMANDS:

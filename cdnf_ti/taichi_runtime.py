@@ -47,6 +47,8 @@ COMPILER_ENV = "CDNF_TI_COMPILER"
 CACHE_ENV = "CDNF_TI_CACHE_DIR"
 #: Environment variable overriding the fast path's lanes per vector (optional; ``kernels.common.lane_count``).
 LANES_ENV = "CDNF_TI_LANES"
+#: The lane counts ``$CDNF_TI_LANES`` may choose (to tune the lane layout on another CPU).
+LANE_CHOICES = (8, 16, 32)
 #: Environment variables sizing a process's CPU thread pool: taichi reads the first, quadrants the second.
 THREADS_ENV = ("TI_CPU_MAX_NUM_THREADS", "QD_CPU_MAX_NUM_THREADS")
 
@@ -96,6 +98,23 @@ def default_compiler() -> str:
     if not have:
         raise BackendUnavailableError("no kernel compiler installed: pip install quadrants (or taichi)")
     return have[0]
+
+
+def lanes_override() -> int | None:
+    """``$CDNF_TI_LANES`` as lanes per vector of the fast path; ``None`` when unset.
+
+    Raises
+    ------
+    UserError
+        The variable is set to anything but one of :data:`LANE_CHOICES`.
+    """
+    raw = os.environ.get(LANES_ENV, "").strip()
+    if not raw:
+        return None
+    if raw not in {str(n) for n in LANE_CHOICES}:
+        raise UserError(f"${LANES_ENV}={raw!r}: lanes per vector must be one of "
+                        f"{', '.join(map(str, LANE_CHOICES))} (unset: the compiler's default)")
+    return int(raw)
 
 
 def _check_compiler(compiler: str) -> None:

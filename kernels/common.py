@@ -1,9 +1,6 @@
 """Shared Taichi helpers: border handling, rational tanh, work partitioning."""
 
-import os
-
-from ..errors import UserError
-from ..taichi_runtime import LANES_ENV, current_compiler, dsl
+from ..taichi_runtime import current_compiler, dsl, lanes_override
 
 ti = dsl()  # taichi or quadrants: the same DSL
 
@@ -274,8 +271,6 @@ def fill(x: F2, value: ti.f32):
 
 #: Lanes per vector element of the fast path, per compiler.
 LANES_BY_COMPILER = {"taichi": 32, "quadrants": 16}
-#: The lane counts ``$CDNF_TI_LANES`` may choose (to tune the layout on another CPU).
-LANE_CHOICES = (8, 16, 32)
 
 
 def lane_count(compiler: str) -> int:
@@ -284,15 +279,10 @@ def lane_count(compiler: str) -> int:
     Raises
     ------
     UserError
-        ``$CDNF_TI_LANES`` is not one of :data:`LANE_CHOICES`.
+        ``$CDNF_TI_LANES`` is set to an unsupported count (see ``taichi_runtime.lanes_override``).
     """
-    raw = os.environ.get(LANES_ENV, "").strip()
-    if not raw:
-        return LANES_BY_COMPILER[compiler]
-    if raw not in {str(n) for n in LANE_CHOICES}:
-        raise UserError(f"${LANES_ENV}={raw!r}: lanes per vector must be one of "
-                        f"{', '.join(map(str, LANE_CHOICES))} (unset: {LANES_BY_COMPILER[compiler]} under {compiler})")
-    return int(raw)
+    override = lanes_override()
+    return LANES_BY_COMPILER[compiler] if override is None else override
 
 
 LANES = lane_count(current_compiler())  # the runtime is running: ti = dsl() above

@@ -21,7 +21,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..atomic import atomic_write, atomic_write_json
-from ..errors import InputError, OutputError, output_error
+from ..errors import InputError, OutputError, UserError, output_error
 from ..frames import iter_grey, open_source
 from ..video import open_writer
 
@@ -35,7 +35,8 @@ def output_format(path: str | os.PathLike) -> str:
         return "avi"
     if suffix == "":
         return "png"
-    raise ValueError(f"{path}: output must be a .avi file (FFV1, lossless) or a folder name (PNG frames)")
+    raise UserError(f"{path}: output must be a .avi file (FFV1, lossless) or a folder name without a suffix "
+                    f"(PNG frames)")
 
 
 def sidecar_path(path: str | os.PathLike) -> Path:

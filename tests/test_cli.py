@@ -42,6 +42,14 @@ def test_missing_input_gives_one_line_error_and_exit_code_2(tmp_path, capsys):
     assert err == [f"error: {tmp_path / 'missing.mp4'}: no such file or folder"]
 
 
+def test_a_run_whose_every_input_is_missing_keeps_the_earlier_summary(looming_npy, tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main([str(looming_npy), "--out", str(out), "--no-progress"]) == 0
+    before = (out / "summary.csv").read_text()
+    assert main([str(tmp_path / "mistyped.mp4"), "--out", str(out), "--no-progress"]) == 2
+    assert (out / "summary.csv").read_text() == before
+
+
 def test_bad_input_does_not_stop_the_other_videos(looming_npy, tmp_path, capsys):
     bad = tmp_path / "bad.mp4"
     bad.write_bytes(b"\x00" * 1000)
@@ -59,7 +67,13 @@ def test_invalid_option_value_is_a_one_line_error(looming_npy, tmp_path, capsys)
 
 def test_unknown_model_is_a_one_line_error(looming_npy, tmp_path, capsys):
     assert main([str(looming_npy), "--model", "nosuch"]) == 2
-    assert "unknown model 'nosuch'" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert err.startswith("error: --model: unknown model 'nosuch'") and err.count("\n") == 1
+
+
+def test_a_model_list_naming_no_model_is_a_one_line_error(looming_npy, tmp_path, capsys):
+    assert main([str(looming_npy), "--model", ",", "--out", str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err == "error: --model names no model: got ','\n"
 
 
 def test_demo_prints_the_table1_cdnf_column(capsys):
@@ -127,3 +141,13 @@ def test_dataset_given_a_file_instead_of_a_folder_says_so(looming_npy, tmp_path,
     assert main(["dataset", str(looming_npy), "--out", str(tmp_path / "o")]) == 2
     assert capsys.readouterr().err.strip() == (
         f"error: {looming_npy}: not a folder (give the folder that holds the videos and labels.csv)")
+
+
+@pytest.mark.parametrize("argv", [["x.npy", "--epsilon", "nan"], ["demo", "--size", "abc"], ["experiment", "nosuch"],
+                                  ["bench", "--frames", "x"], ["render"]])
+def test_a_bad_option_is_one_error_line_pointing_to_help(capsys, argv):
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    err = capsys.readouterr().err
+    assert e.value.code == 2
+    assert err.startswith("error: ") and err.endswith("--help)\n") and err.count("\n") == 1

@@ -43,3 +43,13 @@ def test_unreachable_scheduler_is_a_one_line_error(tmp_path):
 
     with pytest.raises(ValueError, match="cannot connect to the Dask scheduler at tcp://127.0.0.1:9"):
         list(map_tasks(abs, [1], scheduler="tcp://127.0.0.1:9", connect_timeout=1))
+
+
+@pytest.mark.parametrize("address", ["notanaddress", "tcp://"])
+def test_a_malformed_scheduler_address_is_a_one_line_error(address):
+    from cdnf_ti.errors import UserError
+    from cdnf_ti.experiments.parallel import map_tasks
+
+    with pytest.raises(UserError, match=f"cannot connect to the Dask scheduler at {address}: ") as e:
+        list(map_tasks(abs, [1], scheduler=address, connect_timeout=1))
+    assert "\n" not in str(e.value)

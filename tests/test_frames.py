@@ -123,7 +123,7 @@ def test_npy_with_out_of_range_floats_is_an_error_naming_frame(tmp_path):
 def test_not_a_numpy_file_is_an_error(tmp_path):
     p = tmp_path / "junk.npy"
     p.write_bytes(b"definitely not numpy")
-    with pytest.raises(InputError, match=r"junk\.npy: cannot read"):
+    with pytest.raises(InputError, match=r"junk\.npy: not a NumPy \.npy array file"):
         open_source(p)
 
 

@@ -96,3 +96,12 @@ def test_frame_rate_the_avi_cannot_store_is_an_error_not_a_silent_loss(tmp_path,
     assert main(["generate", "dark_looming", "--size", "40", "--fps", "2000", "--out", str(out)]) == 2
     assert "frame rate not representable" in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("name", ["g.mp4", "g.txt"])
+def test_generate_to_an_unsupported_output_type_is_a_one_line_error(tmp_path, capsys, name):
+    rc = main(["generate", "dark_looming", "--size", "40", "--duration", "0.2", "--out", str(tmp_path / name)])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert err.startswith(f"error: {tmp_path / name}: output must be a .avi file") and err.count("\n") == 1
+    assert not (tmp_path / name).exists()

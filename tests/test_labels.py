@@ -81,6 +81,11 @@ def test_missing_or_empty_labels_file_is_rejected(tmp_path):
         read_labels(_write(tmp_path, "clip,label,window_start,window_end\n"))
 
 
+def test_a_folder_given_as_labels_file_is_named_as_such(tmp_path):
+    with pytest.raises(InputError, match="is a folder, not a labels CSV file"):
+        read_labels(tmp_path)
+
+
 def test_unknown_clip_is_rejected_naming_the_row(tmp_path):
     _video(tmp_path, "a")
     p = _write(tmp_path, "clip,label,window_start,window_end\na,collision,2,5\nghost,non-collision,,\n")
@@ -109,6 +114,16 @@ def test_corrupt_clip_is_left_for_the_run_to_report(tmp_path):
     (tmp_path / "bad.mp4").write_bytes(b"this is not a video" * 50)
     p = _write(tmp_path, "clip,label,window_start,window_end\nbad,collision,1,2\n")
     assert validate_dataset(read_labels(p), tmp_path, p)["bad"].name == "bad.mp4"
+
+
+def test_a_clip_name_matching_two_videos_is_rejected_and_the_file_name_settles_it(tmp_path):
+    _video(tmp_path, "a")
+    np.save(tmp_path / "a.npy", np.zeros((12, 24, 32), np.float32))
+    p = _write(tmp_path, "clip,label,window_start,window_end\na,collision,2,5\n")
+    with pytest.raises(InputError, match=r"row 2 \(a\): clip 'a' matches several videos in .*: a\.avi, a\.npy"):
+        validate_dataset(read_labels(p), tmp_path, p)
+    p = _write(tmp_path, "clip,label,window_start,window_end\na.npy,collision,2,5\n")
+    assert validate_dataset(read_labels(p), tmp_path, p)["a.npy"].name == "a.npy"
 
 
 def test_find_clip_prefers_exact_name_then_known_extensions(tmp_path):

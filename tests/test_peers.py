@@ -98,6 +98,17 @@ def test_bench_command_appends_the_simd_report_when_asked(capsys, monkeypatch):
     assert f"| {here} | ON/OFF contrast solve | 75 % | scalar: 1, 8 lanes: 3 |" in out.splitlines()
 
 
+@pytest.mark.parametrize("bad", [["--sizes", "0x0"], ["--sizes", "abc"], ["--sizes", ""], ["--sizes", "20000x20000"],
+                                 ["--frames", "0"], ["--repeats", "0"], ["--compiler", "nosuch"], ["--compiler", ","]])
+def test_bench_command_rejects_bad_options_with_one_line(capsys, bad):
+    from cdnf_ti.run import main
+
+    rc = main(["bench", "--quick", "--no-reference", *bad])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert err.startswith(f"error: {bad[0]}") and err.count("\n") == 1
+
+
 def test_bench_command_rejects_a_missing_clip_with_one_line(capsys):
     from cdnf_ti.run import main
 

@@ -49,6 +49,18 @@ def test_unknown_movie_suffix_is_a_one_line_error_before_any_work(tmp_path):
     assert p.stderr.strip().count("\n") == 0 and "m.gif" in p.stderr and ".mp4" in p.stderr
 
 
+@pytest.mark.parametrize("window", ["5:2", "-3:2", "0:100000"])
+def test_an_impossible_window_is_a_one_line_error_before_any_work(tmp_path, capsys, window):
+    from cdnf_ti.run import main
+
+    out = tmp_path / "m.mp4"
+    rc = main(["render", "stim:dark_looming?size=32", "--out", str(out), f"--window={window}", "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert err.startswith("error: ") and window in err and err.count("\n") == 1
+    assert not out.exists()
+
+
 def test_the_one_writer_stores_every_frame_losslessly_in_avi(tmp_path):
     frames = [np.full((24, 32), k * 10, np.uint8) for k in range(9)]
     assert write_video(tmp_path / "a.avi", frames, 25.0) == 9

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Sequence
 
 from ..atomic import output_lock, prepare_output
-from ..cli_common import add_model_options, check_model_options, parse_models, seed_arg
+from ..cli_common import ArgumentParser, add_model_options, check_model_options, parse_models, seed_arg
 from ..demo import format_table1
 from ..errors import InputError, UserError
 from ..limits import check_frame_size
@@ -133,7 +133,7 @@ def _param_sweep(args) -> int:
 
 def dataset_main(argv: Sequence[str]) -> int:
     """``python -m cdnf_ti.run dataset DIR --labels CSV --out OUT [...]``."""
-    ap = argparse.ArgumentParser(
+    ap = ArgumentParser(
         prog="python -m cdnf_ti.run dataset",
         description="Run models on every labelled clip of a folder (clean and/or with synthetic rain), score "
                     "them (shared/spec/EVALUATION.md) and write traces, results.csv, summary.md/json and "
@@ -178,7 +178,7 @@ def _selectivity(args) -> int:
 
 def experiment_main(argv: Sequence[str]) -> int:
     """``python -m cdnf_ti.run experiment table1|coherence|selectivity|table2 [...]``."""
-    ap = argparse.ArgumentParser(prog="python -m cdnf_ti.run experiment",
+    ap = ArgumentParser(prog="python -m cdnf_ti.run experiment",
                                  description="Regenerate the paper's experiments.")
     sub = ap.add_subparsers(dest="which", required=True, metavar="{table1,coherence,selectivity,table2,sweep}")
     p1 = sub.add_parser("table1", help="basic selectivity on the six basic stimuli (Table I, Fig. 2)")

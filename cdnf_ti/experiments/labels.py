@@ -72,6 +72,7 @@ HINTS = {
     "duplicate": "keep one row per clip (delete or merge the other)",
     "missing": "put the video in the dataset folder or fix the clip name",
     "outside": "frames are 0-based: the last frame of an N-frame video is N-1",
+    "ambiguous": "write the file name with its extension in the clip column",
 }
 
 
@@ -123,6 +124,8 @@ def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
     """
     path = str(path)
     p = Path(path)
+    if p.is_dir():
+        raise InputError(path, "is a folder, not a labels CSV file")
     if not p.is_file():
         raise InputError(path, "labels file not found")
     try:
@@ -259,6 +262,11 @@ def validate_dataset(labels: Iterable[ClipLabel], folder: str | os.PathLike,
         if f is None:
             problems.append(str(_bad(lab.row, "", f"clip {lab.clip!r} has no video in {folder}", "missing")))
             continue
+        same_stem = _videos_named(folder, lab.clip) if f.name != lab.clip else []
+        if len(same_stem) > 1:
+            problems.append(str(_bad(lab.row, lab.clip, f"clip {lab.clip!r} matches several videos in {folder}: "
+                                                        f"{', '.join(p.name for p in same_stem)}", "ambiguous")))
+            continue
         files[lab.clip] = f
         n = frame_count(f)
         if n is None:
@@ -271,6 +279,12 @@ def validate_dataset(labels: Iterable[ClipLabel], folder: str | os.PathLike,
     if problems:
         raise _reject(lp, problems)
     return files
+
+
+def _videos_named(folder: Path, clip: str) -> list[Path]:
+    """The video files (and ``.npy`` arrays) in ``folder`` whose name is ``clip`` plus an extension."""
+    return sorted(p for p in folder.glob(f"{glob_escape(clip)}.*")
+                  if p.is_file() and p.stem == clip and p.suffix.lower() in VIDEO_EXTENSIONS)
 
 
 def unlabelled_videos(folder: str | os.PathLike, labels: Iterable[ClipLabel]) -> list[str]:

@@ -419,7 +419,7 @@ def _dask(fn, tasks, scheduler, arch, rep, connect_timeout=20.0) -> Iterator[tup
     own = not isinstance(scheduler, Client)
     try:
         client = Client(scheduler, timeout=f"{connect_timeout}s") if own else scheduler
-    except OSError as e:
+    except (OSError, ValueError, TypeError) as e:  # unreachable, or not an address (distributed: ValueError)
         raise UserError(f"cannot connect to the Dask scheduler at {scheduler}: {_one_line(e)}") from None
     futures: dict = {}
     try:
