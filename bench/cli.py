@@ -260,8 +260,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from ..taichi_runtime import ARCHS, COMPILERS, check_arch, ensure_taichi, installed_compilers, select_compiler
 
     ap = ArgumentParser(prog="python -m cdnf_ti.run bench",
-                                 description="Throughput table: every model, C-DNF against its peers "
-                                             "(SciPy, OpenCV+NumPy, PyTorch if installed), same run.")
+                        description="Throughput table: every model, C-DNF against its peers "
+                                    "(SciPy, OpenCV+NumPy, PyTorch if installed), same run.")
     ap.add_argument("--quick", action="store_true", help="few frames, one repeat, C-DNF only (under a minute)")
     ap.add_argument("--frames", type=int, default=None, help="frames per input (default 30; 6 with --quick)")
     ap.add_argument("--repeats", type=int, default=None, help="timed repeats, median reported (default 3)")

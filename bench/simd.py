@@ -31,6 +31,7 @@ from typing import Mapping, Sequence
 #: Float arithmetic instructions counted (an LLVM IR line ``%x = <op> [flags] <type> ...``).
 _ARITH = re.compile(r"=\s+(?:fadd|fsub|fmul|fdiv|fneg)\b")
 _VECTOR = re.compile(r"<(\d+) x float>")
+_SCALAR = re.compile(r"\bfloat\b")
 _DEFINE = re.compile(r"^define\s[^@]*@([A-Za-z_][A-Za-z0-9_]*)", re.M)
 
 #: The C-DNF launches reported: (name prefix of the kernel in the IR, label).
@@ -59,7 +60,7 @@ def float_arith_widths(ir: str) -> collections.Counter:
         vec = _VECTOR.search(line)
         if vec is not None:
             widths[int(vec.group(1))] += 1
-        elif re.search(r"\bfloat\b", line):
+        elif _SCALAR.search(line):
             widths[1] += 1
     return widths
 

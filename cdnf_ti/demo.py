@@ -67,7 +67,7 @@ def format_table1(result: dict[str, dict[str, dict]]) -> str:
 
 def main(argv: Sequence[str] = ()) -> int:
     ap = ArgumentParser(prog="python -m cdnf_ti.run demo",
-                                 description="Basic selectivity (paper Table I) on the six basic stimuli.")
+                        description="Basic selectivity (paper Table I) on the six basic stimuli.")
     add_model_options(ap, default_models="cdnf")
     ap.add_argument("--size", type=int, default=600, help="frame size in px (default: %(default)s, as the paper)")
     ap.add_argument("--no-progress", action="store_true")

@@ -47,8 +47,8 @@ def rain_params_from_args(args: argparse.Namespace):
 def generate_main(argv: Sequence[str]) -> int:
     """``generate NAME ... --out PATH``: write one (incoherent, optionally rainy) basic stimulus."""
     ap = ArgumentParser(prog="python -m cdnf_ti.run generate",
-                                 description="Generate a basic or incoherent stimulus to a lossless file "
-                                             "(FFV1 .avi, or a PNG folder) with a JSON sidecar.")
+                        description="Generate a basic or incoherent stimulus to a lossless file "
+                                    "(FFV1 .avi, or a PNG folder) with a JSON sidecar.")
     ap.add_argument("name", choices=BASIC_STIMULI, metavar="NAME", help=f"one of: {', '.join(BASIC_STIMULI)}")
     ap.add_argument("--coherence", type=float, default=1.0, help="coherence degree c in (0, 1] (default 1)")
     ap.add_argument("--seed", type=seed_arg, default=0, help="seed of the incoherent displacement (default 0)")
@@ -114,8 +114,8 @@ def generate_main(argv: Sequence[str]) -> int:
 def rain_main(argv: Sequence[str]) -> int:
     """``rain VIDEO... --out DIR``: add synthetic rain to videos; print each video's SNR."""
     ap = ArgumentParser(prog="python -m cdnf_ti.run rain",
-                                 description="Add synthetic rain (paper, Sec. III-A-2) to videos; write lossless "
-                                             "DIR/<clip>_rain.avi (or PNG folders) plus JSON sidecars with the SNR.")
+                        description="Add synthetic rain (paper, Sec. III-A-2) to videos; write lossless "
+                                    "DIR/<clip>_rain.avi (or PNG folders) plus JSON sidecars with the SNR.")
     ap.add_argument("inputs", nargs="+", metavar="VIDEO", help="video file, image folder, .npy, or stim:NAME?...")
     ap.add_argument("--out", required=True, help="output folder")
     ap.add_argument("--seed", type=seed_arg, default=0, help="rain seed (default: %(default)s)")

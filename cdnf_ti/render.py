@@ -197,12 +197,15 @@ def render_video(source: str | Path, model_name: str, out: str | Path, params: A
     InputError
         Unreadable input, or a video the codec cannot write.
     UserError
-        ``window`` ends past the input's last frame.
+        ``window`` is not ``0 <= start <= end <=`` the input's last frame.
     """
     codec_for(out)  # a bad suffix fails before any work
     src = resolve_input(source)
-    if window is not None and src.n_frames and window[1] >= src.n_frames:
-        raise UserError(f"{source}: window {window[0]}:{window[1]} lies past the last frame ({src.n_frames - 1})")
+    if window is not None:
+        last = src.n_frames - 1 if src.n_frames else None
+        if not 0 <= window[0] <= window[1] or (last is not None and window[1] > last):
+            raise UserError(f"{source}: window {window[0]}:{window[1]} must satisfy 0 <= START <= END <= "
+                            f"{'the last frame' if last is None else last} (frames, inclusive)")
     model = create_model(model_name, params, backend=backend, arch=arch, fps=src.fps)
     frames = render_frames(model, iter_grey(src), src.fps, src.n_frames, window, progress)
     return write_video(out, frames, src.fps)
@@ -230,8 +233,6 @@ def render_main(argv: Sequence[str]) -> int:
             a, b = (int(x) for x in args.window.split(":"))
         except ValueError:
             raise UserError(f"--window must be START:END in frames, got {args.window!r}") from None
-        if not 0 <= a <= b:
-            raise UserError(f"--window needs 0 <= START <= END (frames, inclusive), got {args.window!r}")
         window = (a, b)
     out = Path(args.out) if args.out else Path(f"{Path(str(args.input)).stem}.{models[0]}.mp4")
     n = render_video(args.input, models[0], out, backend=args.backend, arch=args.arch, window=window,

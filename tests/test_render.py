@@ -61,6 +61,15 @@ def test_an_impossible_window_is_a_one_line_error_before_any_work(tmp_path, caps
     assert not out.exists()
 
 
+def test_render_video_itself_rejects_a_reversed_window(tmp_path):
+    from cdnf_ti.errors import UserError
+    from cdnf_ti.render import render_video
+
+    with pytest.raises(UserError, match="window 5:2 must satisfy 0 <= START <= END"):
+        render_video("stim:dark_looming?size=32", "cdnf", tmp_path / "m.mp4", window=(5, 2))
+    assert not (tmp_path / "m.mp4").exists()
+
+
 def test_the_one_writer_stores_every_frame_losslessly_in_avi(tmp_path):
     frames = [np.full((24, 32), k * 10, np.uint8) for k in range(9)]
     assert write_video(tmp_path / "a.avi", frames, 25.0) == 9

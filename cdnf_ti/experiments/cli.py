@@ -179,7 +179,7 @@ def _selectivity(args) -> int:
 def experiment_main(argv: Sequence[str]) -> int:
     """``python -m cdnf_ti.run experiment table1|coherence|selectivity|table2 [...]``."""
     ap = ArgumentParser(prog="python -m cdnf_ti.run experiment",
-                                 description="Regenerate the paper's experiments.")
+                        description="Regenerate the paper's experiments.")
     sub = ap.add_subparsers(dest="which", required=True, metavar="{table1,coherence,selectivity,table2,sweep}")
     p1 = sub.add_parser("table1", help="basic selectivity on the six basic stimuli (Table I, Fig. 2)")
     p2 = sub.add_parser("coherence", help="coherence sweep on the six incoherent stimuli (Fig. 4)")
