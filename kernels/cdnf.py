@@ -2,10 +2,10 @@
 
 Two sets of kernels compute the same equations:
 
-* the generic kernels (``load_frame``, ``contrast_iterate``, ``summation_iterate``, ...)
+* the generic kernels (``load_frame``, ``contrast_solve``, ``summation_solve``, ...)
   take ``ti.ndarray``/NumPy arrays of shape (H, W), so one compiled kernel serves
   every frame size; used for frames narrower than ``2 * LANES`` pixels and on GPUs
-  (one parallel loop per update);
+  (up to ``MAX_STEPS`` updates per launch, one parallel loop each);
 * the fast CPU kernels (``lanes_*``) work on lane-vectorised ``ti.Vector`` fields with
   ghost columns, visit only the rows and columns near a change (pending spans), and
   run a whole solve in one launch with persistent workers (see the sections below
@@ -24,6 +24,7 @@ from .common import (  # noqa: F401 - fill, lanes_fill, LANES, MAX_STEPS, MAX_WO
     LOAD_PHASE,
     MAX_STEPS,
     MAX_WORKERS,
+    RECORD_COEFS,
     WORKER_STRIDE,
     block_span,
     border_index,
@@ -31,7 +32,7 @@ from .common import (  # noqa: F401 - fill, lanes_fill, LANES, MAX_STEPS, MAX_WO
     claim_rows,
     converged,
     dog_column_run,
-    dog_row_pass,
+    dog_row_item,
     fill,
     fill_ghosts,
     finish_rows,
@@ -41,9 +42,10 @@ from .common import (  # noqa: F401 - fill, lanes_fill, LANES, MAX_STEPS, MAX_WO
     lane_neighbours,
     lane_shift,
     lanes_fill,
+    launch_gate,
     luminance_change,
+    record_residuals,
     reset_sync,
-    residuals_out,
     row_runs,
     run_load,
     run_max,
@@ -58,7 +60,9 @@ ti = dsl()  # taichi or quadrants: the same DSL
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
-VEC2 = ti.types.vector(2, ti.f32)
+D1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
+#: A launch record (:class:`~cdnf_ti.kernels.common.LaunchRecord`): (lam, mom) in, residuals out.
+RECORD = ti.types.ndarray(dtype=ti.f32, ndim=2)
 
 
 
@@ -115,38 +119,56 @@ def _lateral_3x3(u: ti.template(), i, j, H, W, wc0, wc1, wc2, mode: ti.template(
     return wc0 * u[i, j] + wc1 * edge + wc2 * diag
 
 
-@ti.kernel
-def contrast_iterate(
-    P: F2, u_on: F2, u_off: F2, out_on: F2, out_off: F2,
-    wc0: ti.f32, wc1: ti.f32, wc2: ti.f32, h: ti.f32, lam: ti.f32, mom: ti.f32,
-    blocks: ti.i32, mode: ti.template(),
-) -> VEC2:
-    """One update of the ON and OFF fields (fused), see :func:`field_update`.
-
-    ``F(u) = P_on - h + vartheta(W_c (*) u)``; ``out`` holds the previous iterate on
-    entry and ``u + mom (u - out) + lam (F(u) - u)`` on return;
-    returns ``(max|F(u_on) - u_on|, max|F(u_off) - u_off|)``.
-    """
+@ti.func
+def _contrast_update(P: ti.template(), u_on: ti.template(), u_off: ti.template(), out_on: ti.template(),
+                     out_off: ti.template(), wc0, wc1, wc2, h, record: ti.template(), j: ti.template(), n, tol, grow,
+                     blocks, mode: ti.template()):
+    """Update ``j`` of a :func:`contrast_solve` launch: one parallel loop, each work item gated by
+    :func:`launch_gate`; its residuals go to ``record[j, 2:4]``."""
     H, W = P.shape[0], P.shape[1]
-    r_on = 0.0
-    r_off = 0.0
     for k in range(H * blocks):
-        i, j0, j1 = block_span(k, W, blocks)
-        m_on = 0.0
-        m_off = 0.0
-        for j in range(j0, j1):
-            p = P[i, j]
-            s_on = _lateral_3x3(u_on, i, j, H, W, wc0, wc1, wc2, mode)
-            s_off = _lateral_3x3(u_off, i, j, H, W, wc0, wc1, wc2, mode)
-            n_on, d_on = field_update(ti.max(p, 0.0), s_on, u_on[i, j], out_on[i, j], h, lam, mom)
-            n_off, d_off = field_update(ti.max(-p, 0.0), s_off, u_off[i, j], out_off[i, j], h, lam, mom)
-            out_on[i, j] = n_on
-            out_off[i, j] = n_off
-            m_on = ti.max(m_on, ti.abs(d_on))
-            m_off = ti.max(m_off, ti.abs(d_off))
-        ti.atomic_max(r_on, m_on)
-        ti.atomic_max(r_off, m_off)
-    return ti.Vector([r_on, r_off])
+        if launch_gate(record, j, n, tol, grow, 2) != 0:
+            lam = record[j, 0]
+            mom = record[j, 1]
+            i, j0, j1 = block_span(k, W, blocks)
+            m_on = 0.0
+            m_off = 0.0
+            for c in range(j0, j1):
+                p = P[i, c]
+                s_on = _lateral_3x3(u_on, i, c, H, W, wc0, wc1, wc2, mode)
+                s_off = _lateral_3x3(u_off, i, c, H, W, wc0, wc1, wc2, mode)
+                n_on, d_on = field_update(ti.max(p, 0.0), s_on, u_on[i, c], out_on[i, c], h, lam, mom)
+                n_off, d_off = field_update(ti.max(-p, 0.0), s_off, u_off[i, c], out_off[i, c], h, lam, mom)
+                out_on[i, c] = n_on
+                out_off[i, c] = n_off
+                m_on = ti.max(m_on, ti.abs(d_on))
+                m_off = ti.max(m_off, ti.abs(d_off))
+            ti.atomic_max(record[j, RECORD_COEFS], m_on)
+            ti.atomic_max(record[j, RECORD_COEFS + 1], m_off)
+
+
+@ti.kernel
+def contrast_solve(
+    P: F2, on_a: F2, off_a: F2, on_b: F2, off_b: F2,
+    wc0: ti.f32, wc1: ti.f32, wc2: ti.f32, h: ti.f32, record: RECORD, n: ti.i32, tol: ti.f32, grow: ti.f32,
+    blocks: ti.i32, mode: ti.template(), steps: ti.template(),
+):
+    """Up to ``n`` ON/OFF updates (fused, :func:`field_update`) in one launch: the generic kernel.
+
+    ``F(u) = P_on - h + vartheta(W_c (*) u)`` (OFF: ``P_off``). Update ``j`` reads the
+    ``_a`` buffers (``j`` even) or the ``_b`` ones and writes the others, which hold the
+    iterate before on entry, with ``lam, mom = record[j, 0:2]``; its residuals
+    ``max|F(u_on) - u_on|``, ``max|F(u_off) - u_off|`` go to ``record[j, 2:4]`` (set to -1 by
+    the caller, :class:`~cdnf_ti.kernels.common.LaunchRecord`). The updates stop after the
+    first one whose residuals are both ``<= tol``, or one whose worst exceeds ``grow`` times
+    the best of the launch. One parallel loop per update (``MAX_STEPS`` of them, those past
+    the stop doing nothing): the kernel for GPUs and narrow frames.
+    """
+    for j in ti.static(range(steps)):
+        if ti.static(j % 2 == 0):
+            _contrast_update(P, on_a, off_a, on_b, off_b, wc0, wc1, wc2, h, record, j, n, tol, grow, blocks, mode)
+        else:
+            _contrast_update(P, on_b, off_b, on_a, off_a, wc0, wc1, wc2, h, record, j, n, tol, grow, blocks, mode)
 
 
 @ti.kernel
@@ -169,42 +191,59 @@ def _summation_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
     return run_max(ti.abs(dv), n)
 
 
+@ti.func
+def _summation_update(S: ti.template(), v: ti.template(), row1: ti.template(), row2: ti.template(),
+                      out: ti.template(), g1: ti.template(), g2: ti.template(), A, B, h, record: ti.template(),
+                      j: ti.template(), n, tol, grow, blocks, mode: ti.template(), R: ti.template()):
+    """Update ``j`` of a :func:`summation_solve` launch: the row pass, then the column pass and
+    the update, two parallel loops gated by :func:`launch_gate`; its residual goes to ``record[j, 2]``."""
+    H, W = v.shape[0], v.shape[1]
+    for k in range(H * blocks):
+        if launch_gate(record, j, n, tol, grow, 1) != 0:
+            dog_row_item(v, row1, row2, g1, g2, k, blocks, mode, R)
+    for k in range(H * blocks):
+        if launch_gate(record, j, n, tol, grow, 1) != 0:
+            lam = record[j, 0]
+            mom = record[j, 1]
+            i, j0, j1 = block_span(k, W, blocks)
+            r = row_runs(_summation_run, (S, v, row1, row2, out, g1, g2, A, B, h, lam, mom, mode, R),
+                         i, j0, j1, H, W, "max", 1)
+            ti.atomic_max(record[j, RECORD_COEFS], ti.cast(r, ti.f32))
+
+
 @ti.kernel
-def summation_iterate(
-    S: F2, v: F2, row1: F2, row2: F2, out: F2, g1: F1, g2: F1,
-    A: ti.f32, B: ti.f32, h: ti.f32, lam: ti.f32, mom: ti.f32,
-    blocks: ti.i32, mode: ti.template(), R: ti.template(),
-) -> ti.f32:
-    """One update of the Summation field (see :func:`field_update`; ``out``: previous iterate).
+def summation_solve(
+    S: F2, v_a: F2, v_b: F2, row1: F2, row2: F2, g1: F1, g2: F1,
+    A: ti.f32, B: ti.f32, h: ti.f32, record: RECORD, n: ti.i32, tol: ti.f32, grow: ti.f32,
+    blocks: ti.i32, mode: ti.template(), R: ti.template(), steps: ti.template(),
+):
+    """Up to ``n`` Summation updates (:func:`field_update`) in one launch: the generic kernel.
 
     The DoG ``W_s = A g1 g1^T - B g2 g2^T`` is applied as separable passes:
     ``row1 = g1 (*)_x v``, ``row2 = g2 (*)_x v``, then
     ``W_s (*) v = A g1 (*)_y row1 - B g2 (*)_y row2`` (exact for every border
     mode; ``R``: the compile-time radius of ``g1``/``g2``).
-    ``F(v) = S - h + vartheta(W_s (*) v)``; returns ``max|F(v) - v|``.
+    ``F(v) = S - h + vartheta(W_s (*) v)``. Buffers, record and stopping as in
+    :func:`contrast_solve` (one residual, ``max|F(v) - v|``, in ``record[j, 2]``).
     """
-    H, W = v.shape[0], v.shape[1]
-    dog_row_pass(v, row1, row2, g1, g2, blocks, mode, R)
-    res = 0.0
-    for k in range(H * blocks):
-        i, j0, j1 = block_span(k, W, blocks)
-        ti.atomic_max(res, ti.cast(row_runs(_summation_run, (S, v, row1, row2, out, g1, g2, A, B, h, lam, mom, mode, R),
-                                            i, j0, j1, H, W, "max", 1), ti.f32))
-    return res
+    for j in ti.static(range(steps)):
+        if ti.static(j % 2 == 0):
+            _summation_update(S, v_a, row1, row2, v_b, g1, g2, A, B, h, record, j, n, tol, grow, blocks, mode, R)
+        else:
+            _summation_update(S, v_b, row1, row2, v_a, g1, g2, A, B, h, record, j, n, tol, grow, blocks, mode, R)
 
 
 @ti.kernel
-def mean_activation(v: F2, theta_scale: ti.f32, blocks: ti.i32) -> ti.f64:
-    """``mean_xy theta([v]+)``, accumulated in float64."""
+def mean_activation(v: F2, theta_scale: ti.f32, blocks: ti.i32, total: D1):
+    """``total[0] += sum_xy theta([v]+)``, accumulated in float64 (the caller zeroes it and
+    divides by ``H W``: no float64 return value, see :class:`~cdnf_ti.kernels.common.LaunchRecord`)."""
     H, W = v.shape[0], v.shape[1]
-    total = ti.f64(0.0)
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
         acc = ti.f64(0.0)
         for j in range(j0, j1):
             acc += ti.cast(tanh_rational(ti.max(v[i, j], 0.0)) * theta_scale, ti.f64)
-        ti.atomic_add(total, acc)
-    return total / ti.f64(H * W)
+        ti.atomic_add(total[0], acc)
 
 
 # -- pending spans ---------------------------------------------------------------
@@ -332,17 +371,15 @@ def _activation_row(v: ti.template(), s, i, theta_scale, W: ti.template()):
 
 
 @ti.kernel
-def lanes_mean_activation(v: ti.template(), s: ti.i32, theta_scale: ti.f32, W: ti.template()) -> ti.f64:
-    """``mean_xy theta([v]+)`` of buffer ``s`` over the frame columns, accumulated in float64.
+def lanes_mean_activation(v: ti.template(), s: ti.i32, theta_scale: ti.f32, W: ti.template(), total: D1):
+    """``total[0] += sum_xy theta([v]+)`` of buffer ``s`` over the frame columns, in float64
+    (as :func:`mean_activation`: the caller zeroes it and divides by ``H W``).
 
-    The Summation solve computes it itself when it converges; this kernel serves the
+    The Summation solve computes the mean itself when it converges; this kernel serves the
     other cases.
     """
-    H = v.shape[1]
-    total = ti.f64(0.0)
-    for i in range(H):
-        total += _activation_row(v, s, i, theta_scale, W)
-    return total / ti.f64(H * W)
+    for i in range(v.shape[1]):
+        ti.atomic_add(total[0], _activation_row(v, s, i, theta_scale, W))
 
 
 # -- the contrast solve --------------------------------------------------------------
@@ -395,18 +432,18 @@ def _contrast_row(P: ti.template(), u: ti.template(), p, q, sign: ti.template(),
 def lanes_contrast_solve(
     frame: ti.types.ndarray(ndim=2), load: ti.i32, L: ti.template(), scale: ti.f32, first: ti.i32,
     P: ti.template(), u_on: ti.template(), u_off: ti.template(), pend: ti.template(), c: ti.i32,
-    k0: ti.f32, k1: ti.f32, h: ti.f32, coef: ti.types.ndarray(dtype=ti.f32, ndim=2), n: ti.i32,
+    k0: ti.f32, k1: ti.f32, h: ti.f32, record: RECORD, n: ti.i32,
     tau: ti.f32, tol: ti.f32, grow: ti.f32, nw: ti.i32, sync: ti.template(), rbuf: ti.template(),
     W: ti.template(), mode: ti.template(),
     S: ti.template(), pend_s: ti.template(), alpha_on: ti.f32, alpha_off: ti.f32, theta_scale: ti.f32,
-) -> ti.types.vector(2 * MAX_STEPS, ti.f32):
+) :
     """Up to ``n`` ON/OFF updates (:func:`field_update`) in one launch, by persistent workers.
 
     Update ``j`` reads buffer ``(c + j) % 2`` of ``u_on``/``u_off`` and writes the other
-    one, with ``lam = coef[j, 0]``, ``mom = coef[j, 1]``; the updates stop after the
-    first one whose residuals are both ``<= tol``, or one whose worst residual exceeds
-    ``grow`` times the best of the launch. Returns ``(on_0, off_0, on_1, off_1, ...)``,
-    the residuals ``max|F(u) - u|`` of each update (-1 for updates not run). Only the
+    one, with ``lam, mom = record[j, 0:2]``; the updates stop after the first one whose
+    residuals are both ``<= tol``, or one whose worst residual exceeds ``grow`` times the
+    best of the launch. The residuals ``max|F(u) - u|`` of each update (ON, OFF; -1 for
+    updates not run) go to ``record[j, 2:4]`` (:class:`~cdnf_ti.kernels.common.LaunchRecord`). Only the
     elements near a pending span (``pend``, same parity as the buffers) are visited.
     With ``load`` set, the workers first load ``frame`` (:func:`_load_row`). When the
     launch converges, they go on to compute the Summation input ``S`` of the result
@@ -434,8 +471,8 @@ def lanes_contrast_solve(
                     ran = j + 1
                     p = (c + j) % 2
                     q = 1 - p
-                    lam = coef[j, 0]
-                    mom = coef[j, 1]
+                    lam = record[j, 0]
+                    mom = record[j, 1]
                     while True:
                         i0, i1 = claim_rows(sync, j, w, nw, H)
                         if i0 >= i1:
@@ -473,7 +510,7 @@ def lanes_contrast_solve(
                         break
                     for i in range(i0, i1):
                         _summation_input_row(u_on, u_off, f, S, pend_s, i, alpha_on, alpha_off, theta_scale, W)
-    return residuals_out(rbuf, 2)
+    record_residuals(rbuf, record, 2)
 
 
 # -- the Summation solve ---------------------------------------------------------------
@@ -484,7 +521,7 @@ def lanes_summation_kernel(g1: tuple, g2: tuple):
 
     The taps (``2 R + 1`` floats each, symmetric) are compiled in as constants,
     which saves their per-launch argument passing; one kernel per parameter set.
-    Buffers, coefficients, stopping, workers and residuals as in
+    Buffers, launch record, stopping, workers and residuals as in
     :func:`lanes_contrast_solve`; each update is two phases (row pass, then column
     pass and update).
     """
@@ -495,14 +532,15 @@ def lanes_summation_kernel(g1: tuple, g2: tuple):
     @ti.kernel
     def lanes_summation_solve(
         S: ti.template(), v: ti.template(), row1: ti.template(), row2: ti.template(), pend: ti.template(),
-        c: ti.i32, A: ti.f32, B: ti.f32, h: ti.f32, coef: ti.types.ndarray(dtype=ti.f32, ndim=2), n: ti.i32,
+        c: ti.i32, A: ti.f32, B: ti.f32, h: ti.f32, record: RECORD, n: ti.i32,
         tau: ti.f32, tol: ti.f32, grow: ti.f32, nw: ti.i32, sync: ti.template(), rbuf: ti.template(),
-        W: ti.template(), mode: ti.template(), theta_scale: ti.f32, msum: ti.template(),
-    ) -> ti.types.vector(MAX_STEPS + 1, ti.f64):
-        """Lane-vectorised :func:`summation_iterate` by persistent workers: separable DoG, same equations.
+        W: ti.template(), mode: ti.template(), theta_scale: ti.f32, msum: ti.template(), mean: D1,
+    ):
+        """Lane-vectorised :func:`summation_solve` by persistent workers: separable DoG, same equations.
 
-        Returns the residuals (as :func:`lanes_contrast_solve`) and, last,
-        ``mean_xy theta([v]+)`` of the result when the launch converged (else -1).
+        The residuals go to ``record`` (as :func:`lanes_contrast_solve`), and
+        ``mean_xy theta([v]+)`` of the result, when the launch converged, to ``mean[0]``
+        (else -1).
         """
         H = S.shape[0]
         E1 = (LANES + W - 1) // LANES
@@ -544,8 +582,8 @@ def lanes_summation_kernel(g1: tuple, g2: tuple):
                             finish_rows(sync, 2 * j, i1 - i0)
                         wait_phase(sync, 2 * j, H)
                         # phase 2j + 1: vertical passes and the update
-                        lam = coef[j, 0]
-                        mom = coef[j, 1]
+                        lam = record[j, 0]
+                        mom = record[j, 1]
                         while True:
                             i0, i1 = claim_rows(sync, 2 * j + 1, w, nw, H)
                             if i0 >= i1:
@@ -585,12 +623,9 @@ def lanes_summation_kernel(g1: tuple, g2: tuple):
                             acc += _activation_row(v, f, i, theta_scale, W)
                         ti.atomic_add(msum[0], acc)
                     msum[1] = 1.0
-        out = ti.Vector([0.0] * (MAX_STEPS + 1), dt=ti.f64)
-        for j in ti.static(range(MAX_STEPS)):
-            out[j] = ti.cast(rbuf[j, 0], ti.f64)
-        out[MAX_STEPS] = -1.0
+        record_residuals(rbuf, record, 1)
+        mean[0] = -1.0
         if msum[1] > 0.0:  # the mean was computed (the workers have all finished here)
-            out[MAX_STEPS] = msum[0] / ti.f64(H * W)
-        return out
+            mean[0] = msum[0] / ti.f64(H * W)
 
     return lanes_summation_solve

@@ -1,4 +1,8 @@
-"""Shared Taichi helpers: border handling, rational tanh, work partitioning."""
+"""Shared Taichi helpers: border handling, rational tanh, work partitioning, launch records."""
+
+from typing import Sequence
+
+import numpy as np
 
 from ..taichi_runtime import current_compiler, dsl, lanes_override
 
@@ -218,10 +222,17 @@ def dog_row_pass(v: ti.template(), row1: ti.template(), row2: ti.template(), g1:
     the taps unroll). Called at a kernel's top level, the loop is the kernel's
     parallel loop over (row, column-block) items.
     """
+    for k in range(v.shape[0] * blocks):
+        dog_row_item(v, row1, row2, g1, g2, k, blocks, mode, R)
+
+
+@ti.func
+def dog_row_item(v: ti.template(), row1: ti.template(), row2: ti.template(), g1: ti.template(),
+                 g2: ti.template(), k, blocks, mode: ti.template(), R: ti.template()):
+    """Work item ``k`` (a row's column block, :func:`block_span`) of :func:`dog_row_pass`."""
     H, W = v.shape[0], v.shape[1]
-    for k in range(H * blocks):
-        i, j0, j1 = block_span(k, W, blocks)
-        row_runs(_dog_row_run, (v, row1, row2, g1, g2, mode, R), i, j0, j1, H, W, "sum", ti.static(max(R, 1)))
+    i, j0, j1 = block_span(k, W, blocks)
+    row_runs(_dog_row_run, (v, row1, row2, g1, g2, mode, R), i, j0, j1, H, W, "sum", ti.static(max(R, 1)))
 
 
 @ti.func
@@ -399,7 +410,82 @@ def lanes_fill(x: ti.template(), value: ti.f32):
         x[I] = ti.Vector([value] * LANES, dt=ti.f32)
 
 
-MAX_STEPS = 16  # updates per launch of the persistent-worker kernels (steps_per_launch <= 16)
+MAX_STEPS = 16  # updates per launch of the solve kernels (steps_per_launch <= 16)
+
+# -- launch records --------------------------------------------------------------------
+# A solve kernel runs up to MAX_STEPS updates of a fixed point in one launch. Its
+# coefficients go in, and its residuals come out, through one small NumPy array (a
+# kernel argument), not through a return value: returning a vector costs ~210 us per
+# launch on the CPU under taichi 1.7.4 (a NumPy argument ~12 us, zero-copy), and ~1 ms
+# on a GPU, where a NumPy argument costs ~0.05-0.15 ms (copied in and out around the
+# launch; docs/PERFORMANCE.md, round 9).
+
+RECORD_COEFS = 2  # columns 0, 1 of a launch record: lam, mom
+
+
+class LaunchRecord:
+    """The ``(lam, mom)`` in and the residuals out of one solve launch, as one float32 array.
+
+    Row ``j`` of :attr:`array` (shape ``(MAX_STEPS, 2 + fields)``) holds update ``j``'s
+    ``(lam, mom)`` in columns 0-1 and, after the launch, its residual ``max |F(u) - u|``
+    per field in columns 2.. (-1: the update did not run).
+
+    Parameters
+    ----------
+    fields : int
+        Fields updated together (2: ON and OFF; 1: Summation).
+    """
+
+    def __init__(self, fields: int):
+        self.fields = fields
+        self.array = np.zeros((MAX_STEPS, RECORD_COEFS + fields), np.float32)
+
+    def start(self, coefs: Sequence[tuple[float, float]]) -> np.ndarray:
+        """Fill in the coefficients of a launch of ``len(coefs)`` updates; returns :attr:`array`."""
+        if not 1 <= len(coefs) <= MAX_STEPS:
+            raise ValueError(f"1..{MAX_STEPS} updates per launch, got {len(coefs)}")
+        a = self.array
+        a[: len(coefs), :RECORD_COEFS] = np.asarray(coefs, np.float32).reshape(-1, RECORD_COEFS)
+        a[:, RECORD_COEFS:] = -1.0
+        return a
+
+    def residuals(self, count: int) -> list[tuple[float, ...]]:
+        """The residuals of the updates the launch ran, of the first ``count`` (per update, per field)."""
+        out = []
+        for row in self.array[:count, RECORD_COEFS:]:
+            if row.min() < 0.0:
+                break
+            out.append(tuple(float(r) for r in row))
+        return out
+
+
+@ti.func
+def record_residuals(rbuf: ti.template(), record: ti.template(), fields: ti.template()):
+    """Copy the residuals of a launch (``rbuf[j, f]``, -1: not run) into its record (serial tail)."""
+    for j in ti.static(range(MAX_STEPS)):
+        for f in ti.static(range(fields)):
+            record[j, RECORD_COEFS + f] = rbuf[j, f]
+
+
+@ti.func
+def launch_gate(record: ti.template(), j: ti.template(), n, tol, grow, fields: ti.template()):
+    """Whether update ``j`` (compile-time) of a launch of ``n`` runs, from the residuals of the
+    updates before it in ``record`` (:class:`LaunchRecord`): 1 if ``j < n`` and none of them
+    converged (every residual ``<= tol``), grew (:func:`go_on`) or was not run, else 0.
+
+    Generic solve kernels (one parallel loop per update) call it in every work item; the
+    record's earlier rows are final by then (the loops of a launch run one after another).
+    """
+    go = ti.select(j < n, 1, 0)
+    best = ti.f32(3.0e38)
+    for k in ti.static(range(j)):
+        r = record[k, RECORD_COEFS]
+        for f in ti.static(range(1, fields)):
+            r = ti.max(r, record[k, RECORD_COEFS + f])
+        g, best = go_on(r, best, tol, grow)
+        go = go & g
+    return go
+
 
 # -- persistent workers ------------------------------------------------------------
 # taichi launches a parallel loop through a thread pool whose hand-off costs ~50 us
@@ -515,12 +601,3 @@ def converged(sync: ti.template(), rbuf: ti.template(), go, ran, phase, H, tol):
         wait_phase(sync, phase, H)
     last = ti.max(ran - 1, 0)
     return (ran > 0) & (ti.max(rbuf[last, 0], rbuf[last, 1]) <= tol)
-
-
-@ti.func
-def residuals_out(rbuf: ti.template(), nres: ti.template()):
-    out = ti.Vector([0.0] * (nres * MAX_STEPS), dt=ti.f32)
-    for j in ti.static(range(MAX_STEPS)):
-        for f in ti.static(range(nres)):
-            out[nres * j + f] = rbuf[j, f]
-    return out

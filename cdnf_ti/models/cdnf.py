@@ -39,13 +39,17 @@ class TaichiCDNFBackend:
         ti = dsl()
 
         from ..kernels import cdnf as K
-        from ..kernels.common import BORDER_CODES, column_blocks
+        from ..kernels.common import BORDER_CODES, LaunchRecord, column_blocks
 
         self.K = K
         self.params = params
         self.shape = tuple(shape)
         self.mode = BORDER_CODES[params.border]
         self.blocks = column_blocks(self.shape[1], arch)  # work items per row
+        self._tol32 = float(np.float32(params.tol))
+        self._records = {"c": LaunchRecord(2), "s": LaunchRecord(1)}  # contrast, Summation launches
+        self.steps = dict(self.launch_steps(arch))
+        self._total = np.zeros(1)  # the mean activation's float64 sum
 
         def nd() -> "ti.Ndarray":
             return ti.ndarray(ti.f32, self.shape)
@@ -69,6 +73,18 @@ class TaichiCDNFBackend:
         for a in self.v:
             K.fill(a, v0)
 
+    @staticmethod
+    def launch_steps(arch: str) -> dict[str, int]:
+        """Updates per launch of the contrast (``"c"``) and Summation (``"s"``) solve kernels on ``arch``.
+
+        A launch runs its updates as consecutive parallel loops, each a compiled copy of the
+        update, so more updates per launch cost compile time: about 0.06 s per contrast copy
+        (1.7 s for 8) but 7 s for one Summation copy, 21 s for two. A GPU runs 8 contrast
+        updates per launch (Chebyshev converges in about 8), saving a launch and a read-back
+        of ~0.15-0.25 ms each; on the CPU a launch costs ~30 us, so one update per launch.
+        """
+        return {"c": 8, "s": 1} if arch != "cpu" else {"c": 1, "s": 1}
+
     def save_rest(self) -> None:
         self.K.copy(self.u_on[self.c], self.rest_u)
         self.K.copy(self.v[self.s], self.rest_v)
@@ -90,11 +106,34 @@ class TaichiCDNFBackend:
         self.K.fill(self.P, 0.0)
 
     def contrast_iterate(self, lam: float, mom: float = 0.0) -> tuple[float, float]:
-        c, n = self.c, 1 - self.c
-        r = self.K.contrast_iterate(self.P, self.u_on[c], self.u_off[c], self.u_on[n], self.u_off[n],
-                                    *self.wc, self.params.h, lam, mom, self.blocks, self.mode)
-        self.c = n
-        return float(r[0]), float(r[1])
+        return self.contrast_iterate_many([(lam, mom)])[0]
+
+    def contrast_iterate_many(self, coefs) -> list[tuple[float, float]]:
+        """Up to ``len(coefs)`` ON/OFF updates (``coefs``: ``(lam, mom)`` each; see the solver) in
+        launches of :attr:`steps` ``["c"]`` (:func:`~cdnf_ti.kernels.cdnf.contrast_solve`); returns
+        the residuals of the updates run."""
+        def launch(rec, chunk):
+            c, n = self.c, 1 - self.c
+            self.K.contrast_solve(self.P, self.u_on[c], self.u_off[c], self.u_on[n], self.u_off[n], *self.wc,
+                                  self.params.h, rec.start(chunk), len(chunk), self._tol32, RESTART_GROWTH,
+                                  self.blocks, self.mode, self.steps["c"])
+            res = rec.residuals(len(chunk))
+            self.c = (c + len(res)) % 2
+            return res
+
+        return self._launches("c", launch, coefs)
+
+    def _launches(self, group: str, launch, coefs) -> list[tuple[float, ...]]:
+        """Run ``coefs`` in launches of ``steps[group]`` updates until one stops early or converges."""
+        out: list[tuple[float, ...]] = []
+        step = self.steps[group]
+        for k in range(0, len(coefs), step):
+            chunk = coefs[k: k + step]
+            res = launch(self._records[group], chunk)
+            out += res
+            if len(res) < len(chunk) or max(res[-1]) <= self._tol32:
+                break
+        return out
 
     def summation_input(self) -> None:
         p = self.params
@@ -102,15 +141,28 @@ class TaichiCDNFBackend:
                                p.alpha_on, p.alpha_off, THETA_SCALE)
 
     def summation_iterate(self, lam: float, mom: float = 0.0) -> tuple[float]:
+        return self.summation_iterate_many([(lam, mom)])[0]
+
+    def summation_iterate_many(self, coefs) -> list[tuple[float]]:
+        """Up to ``len(coefs)`` Summation updates in launches of :attr:`steps` ``["s"]``
+        (:func:`~cdnf_ti.kernels.cdnf.summation_solve`); as :meth:`contrast_iterate_many`."""
         p = self.params
-        s, n = self.s, 1 - self.s
-        r = self.K.summation_iterate(self.S, self.v[s], self.row1, self.row2, self.v[n], self.g1, self.g2,
-                                     p.A, p.B, p.h, lam, mom, self.blocks, self.mode, int(p.radius_s))
-        self.s = n
-        return (float(r),)
+
+        def launch(rec, chunk):
+            s, n = self.s, 1 - self.s
+            self.K.summation_solve(self.S, self.v[s], self.v[n], self.row1, self.row2, self.g1, self.g2,
+                                   p.A, p.B, p.h, rec.start(chunk), len(chunk), self._tol32, RESTART_GROWTH,
+                                   self.blocks, self.mode, int(p.radius_s), self.steps["s"])
+            res = rec.residuals(len(chunk))
+            self.s = (s + len(res)) % 2
+            return res
+
+        return self._launches("s", launch, coefs)
 
     def mean_activation(self) -> float:
-        return float(self.K.mean_activation(self.v[self.s], THETA_SCALE, self.blocks))
+        self._total[0] = 0.0
+        self.K.mean_activation(self.v[self.s], THETA_SCALE, self.blocks, self._total)
+        return float(self._total[0]) / (self.shape[0] * self.shape[1])
 
     def fields(self) -> dict[str, np.ndarray]:
         return {
@@ -132,6 +184,7 @@ class _LaneWorkspace(SharedWorkspace):
         ti = dsl()
 
         from ..kernels.cdnf import LANES, MAX_STEPS, SPAN, lane_layout, sync_size
+        from ..kernels.common import LaunchRecord
 
         H, W = shape
         self.W = W
@@ -149,7 +202,8 @@ class _LaneWorkspace(SharedWorkspace):
         self.sync = ti.field(ti.i32, sync_size())  # phase counters of the persistent workers
         self.rbuf = ti.field(ti.f32, (MAX_STEPS, 2))  # per-update residuals of a solve launch
         self.msum = ti.field(ti.f64, 2)  # sum theta([v]+) of a converged Summation solve, and its flag
-        self.coef = np.zeros((MAX_STEPS, 2), np.float32)  # (lam, mom) per update of a launch
+        self.records = {"c": LaunchRecord(2), "s": LaunchRecord(1)}  # contrast, Summation launches
+        self.mean = np.zeros(1)  # mean theta([v]+) of a Summation launch (-1: not computed)
 
     def all_active(self) -> None:
         """Mark every element of both groups pending (after any change made outside the kernels)."""
@@ -334,23 +388,8 @@ class LaneTaichiCDNFBackend:
         self.mean_activation()
         self._acquire().all_active()
 
-    @staticmethod
-    def _done(res: list[tuple[float, ...]]) -> list[tuple[float, ...]]:
-        """The updates a solve launch ran (the kernel reports -1 for the others)."""
-        for j, r in enumerate(res):
-            if min(r) < 0.0:
-                return res[:j]
-        return res
-
     def contrast_iterate(self, lam: float, mom: float = 0.0) -> tuple[float, float]:
         return self.contrast_iterate_many([(lam, mom)])[0]
-
-    def _coefs(self, coefs) -> np.ndarray:
-        if not 1 <= len(coefs) <= self.K.MAX_STEPS:
-            raise ValueError(f"1..{self.K.MAX_STEPS} updates per launch, got {len(coefs)}")
-        buf = self.ws.coef
-        buf[: len(coefs)] = np.asarray(coefs, np.float32).reshape(-1, 2)
-        return buf
 
     def contrast_iterate_many(self, coefs) -> list[tuple[float, float]]:
         """Several ON/OFF updates in one launch (``coefs``: ``(lam, mom)`` each); see the solver.
@@ -366,11 +405,12 @@ class LaneTaichiCDNFBackend:
             self._frame_in = None
         else:
             frame, scale, first, load = self._idle_frame, 1.0, 0, 0
-        r = self.K.lanes_contrast_solve(
+        rec = ws.records["c"]
+        self.K.lanes_contrast_solve(
             frame, load, ws.L, scale, first, ws.P, ws.u_on, ws.u_off, ws.pend["c"], c, *self.k, p.h,
-            self._coefs(coefs), len(coefs), self.tau, self._tol32, RESTART_GROWTH, self.nw, ws.sync, ws.rbuf,
+            rec.start(coefs), len(coefs), self.tau, self._tol32, RESTART_GROWTH, self.nw, ws.sync, ws.rbuf,
             self.W, self.mode, ws.S, ws.pend["s"], p.alpha_on, p.alpha_off, THETA_SCALE)
-        res = self._done([(float(r[2 * j]), float(r[2 * j + 1])) for j in range(len(coefs))])
+        res = rec.residuals(len(coefs))
         self.c = (c + len(res)) % 2
         self._s_ready = bool(res) and max(res[-1]) <= self._tol32
         self._mean = None
@@ -399,12 +439,13 @@ class LaneTaichiCDNFBackend:
         p = self.params
         s = self.s
         kern = self.K.lanes_summation_kernel(*self._taps)
-        r = kern(ws.S, ws.v, ws.row1, ws.row2, ws.pend["s"], s, p.A, p.B, p.h, self._coefs(coefs), len(coefs),
-                 self.tau, self._tol32, RESTART_GROWTH, self.nw, ws.sync, ws.rbuf, self.W, self.mode, THETA_SCALE,
-                 ws.msum)
-        res = self._done([(float(r[j]),) for j in range(len(coefs))])
+        rec = ws.records["s"]
+        kern(ws.S, ws.v, ws.row1, ws.row2, ws.pend["s"], s, p.A, p.B, p.h, rec.start(coefs), len(coefs),
+             self.tau, self._tol32, RESTART_GROWTH, self.nw, ws.sync, ws.rbuf, self.W, self.mode, THETA_SCALE,
+             ws.msum, ws.mean)
+        res = rec.residuals(len(coefs))
         self.s = (s + len(res)) % 2
-        mean = float(r[self.K.MAX_STEPS])
+        mean = float(ws.mean[0])
         self._mean = mean if mean >= 0.0 else None
         return res
 
@@ -414,7 +455,9 @@ class LaneTaichiCDNFBackend:
         if self._mean is not None:
             mean, self._mean = self._mean, None
             return mean
-        return float(self.K.lanes_mean_activation(ws.v, self.s, THETA_SCALE, self.W))
+        ws.mean[0] = 0.0
+        self.K.lanes_mean_activation(ws.v, self.s, THETA_SCALE, self.W, ws.mean)
+        return float(ws.mean[0]) / (self.H * self.W)
 
     def fields(self) -> dict[str, np.ndarray]:
         ws = self._acquire()
