@@ -1,7 +1,7 @@
 """Taichi kernels of the LGMD family: LGMD2, LGMD1 and F-LGMD (float32 layers).
 
 Each model needs two launches per frame: :func:`load_frame` (photoreceptors and
-the ON/OFF channels, pointwise, returning ``sum |P|`` for the PM/FFI pathway) and
+the ON/OFF channels, pointwise, with ``sum |P|`` for the PM/FFI pathway) and
 one layer kernel whose top-level loops run one after another (local summation,
 grouping); F-LGMD adds its fixed-point iteration. Every pass reads values stored
 by the pass before it, so nothing is computed twice per pixel.
@@ -10,6 +10,13 @@ the authors' C# code. Loops run over (row, column-block) work items
 (:func:`cdnf_ti.kernels.common.block_span`); each item visits its columns in runs
 (:func:`cdnf_ti.kernels.common.row_runs`), so the per-pixel equations below are
 written once, on vectors of ``n`` consecutive columns.
+
+No kernel returns a value (returning a float64 or a vector costs ~0.1-0.2 ms per
+launch on the CPU and 1-2 ms on CUDA): each writes its results into ``out``, a
+small float64 NumPy array (:data:`D1`) that the caller sets before the launch
+(zeros for sums and maxima) and reads after it. Every work item adds (or maxes)
+its partial result into ``out`` once; the persistent-worker kernels reduce into
+their own fields and copy the results into ``out`` in their serial tail.
 
 The NumPy float64 oracle of every stage is :mod:`cdnf_ti.baselines_reference`.
 """
@@ -48,7 +55,7 @@ from .common import (  # noqa: F401
 ti = dsl()  # taichi or quadrants: the same DSL
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
-VEC2D = ti.types.vector(2, ti.f64)
+D1 = ti.types.ndarray(dtype=ti.f64, ndim=1)  # a launch's results ``out``, set by the caller before it
 
 
 @ti.func
@@ -119,15 +126,13 @@ def _group_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
 
 
 @ti.func
-def _group(S: ti.template(), G: ti.template(), blocks):
+def _group(S: ti.template(), G: ti.template(), blocks, out: ti.template()):
     """Grouping ``G = S (*) (1/9 ones 3x3)`` over the frame (a top-level parallel loop);
-    returns ``sum G`` accumulated in float64."""
+    adds ``sum G`` (float64) to ``out[0]``."""
     H, W = S.shape[0], S.shape[1]
-    total = ti.f64(0.0)
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        ti.atomic_add(total, row_runs(_group_run, (S, G), i, j0, j1, H, W, "sum", 1))
-    return total
+        ti.atomic_add(out[0], row_runs(_group_run, (S, G), i, j0, j1, H, W, "sum", 1))
 
 
 @ti.func
@@ -143,8 +148,8 @@ def _load_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
 
 @ti.kernel
 def load_frame(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, on: F2, off: F2, on_p: F2, off_p: F2,
-               scale: ti.f32, first: ti.i32, clip: ti.f32, dc: ti.f32, blocks: ti.i32) -> ti.f64:
-    """Photoreceptors and the ON/OFF channels of one frame; returns ``sum |P|``.
+               scale: ti.f32, first: ti.i32, clip: ti.f32, dc: ti.f32, blocks: ti.i32, out: D1):
+    """Photoreceptors and the ON/OFF channels of one frame; adds ``sum |P|`` to ``out[0]`` (set to 0 by the caller).
 
     ``g = floor(frame * scale + 0.5)`` (integer grey levels); ``P = g - L`` (0 when
     ``first``); ``L = g``; ``ON = P [P >= clip] + dc ON(t-1)``,
@@ -158,12 +163,10 @@ def load_frame(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, on: F2, off: F2, o
     """
     H, W = L.shape[0], L.shape[1]
     keep = ti.select(first != 0, 0.0, 1.0)
-    total = ti.f64(0.0)
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        ti.atomic_add(total, row_runs(_load_run, (frame, L, P, on, off, on_p, off_p, scale, keep, clip, dc),
-                                      i, j0, j1, H, W, "sum", 1))
-    return total
+        ti.atomic_add(out[0], row_runs(_load_run, (frame, L, P, on, off, on_p, off_p, scale, keep, clip, dc),
+                                       i, j0, j1, H, W, "sum", 1))
 
 
 @ti.func
@@ -203,14 +206,15 @@ def lgmd2_layers(
     kn0: ti.f32, kn1: ti.f32, kn2: ti.f32, an0: ti.f32, an1: ti.f32, an2: ti.f32,
     kf0: ti.f32, kf1: ti.f32, kf2: ti.f32, af0: ti.f32, af1: ti.f32, af2: ti.f32,
     e_on: ti.f32, e_off: ti.f32, e_onoff: ti.f32,
-    delta_c: ti.f32, c_w: ti.f32, c_de: ti.f32, t_de: ti.f32, blocks: ti.i32,
-) -> VEC2D:
-    """LGMD2 layers of one frame from its ON/OFF channels (:func:`load_frame`); returns ``(sum G, max |Ce|)``.
+    delta_c: ti.f32, c_w: ti.f32, c_de: ti.f32, t_de: ti.f32, blocks: ti.i32, out: D1,
+):
+    """LGMD2 layers of one frame from its ON/OFF channels (:func:`load_frame`).
 
     Delayed 3x3 inhibitions (centre included);
     ``S = e_on S_on + e_off S_off + e_onoff S_on S_off`` with
     ``S_on = [ON - w_on I_on]+``; ``Ce = S (*) ones/9``;
     ``G = S Ce / (delta_c + max|Ce| / c_w)``, zero unless ``c_de G >= t_de``.
+    ``out[0] = sum G``, ``out[1] = max |Ce|`` (both set to 0 by the caller).
     """
     H, W = on.shape[0], on.shape[1]
     kn = ti.Vector([kn0, kn1, kn2])
@@ -222,16 +226,14 @@ def lgmd2_layers(
         i, j0, j1 = block_span(k, W, blocks)
         row_runs(_lgmd2_run, (on, off, on_p, off_p, I_on, I_off, S, kn, an, kf, af, w_on, w_off, e),
                  i, j0, j1, H, W, "sum", 1)
-    mx = 0.0
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        ti.atomic_max(mx, ti.cast(row_runs(_excitation_run, (S, Ce), i, j0, j1, H, W, "max", 1), ti.f32))
-    total = ti.f64(0.0)
+        ti.atomic_max(out[1], row_runs(_excitation_run, (S, Ce), i, j0, j1, H, W, "max", 1))
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
+        mx = ti.cast(out[1], ti.f32)  # max |Ce| (a float32 value: exact)
         inv_omega = 1.0 / (delta_c + mx / c_w)
-        ti.atomic_add(total, row_runs(_grouping_run, (S, Ce, G, inv_omega, c_de, t_de), i, j0, j1, H, W, "sum", 1))
-    return ti.Vector([total, ti.cast(mx, ti.f64)])
+        ti.atomic_add(out[0], row_runs(_grouping_run, (S, Ce, G, inv_omega, c_de, t_de), i, j0, j1, H, W, "sum", 1))
 
 
 @ti.func
@@ -253,14 +255,14 @@ def _lgmd1_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
 def lgmd1_layers(
     on: F2, off: F2, on_p: F2, off_p: F2, I_on: F2, E_off: F2, S: F2, G: F2,
     w_i_on: ti.f32, w_i_off: ti.f32, k1: ti.f32, k2: ti.f32, a1: ti.f32, a2: ti.f32,
-    e_on: ti.f32, e_off: ti.f32, e_onoff: ti.f32, t_s: ti.f32, blocks: ti.i32,
-) -> ti.f64:
-    """LGMD1 layers of one frame from its ON/OFF channels (:func:`load_frame`); returns ``sum G``.
+    e_on: ti.f32, e_off: ti.f32, e_onoff: ti.f32, t_s: ti.f32, blocks: ti.i32, out: D1,
+):
+    """LGMD1 layers of one frame from its ON/OFF channels (:func:`load_frame`).
 
     ``I_on``/``E_off``: delayed 3x3 spreads (centre 0) of ON/OFF;
     ``S_on = ON - w_i_on I_on``, ``S_off = E_off - w_i_off OFF``;
     ``S = e_on S_on + e_off S_off + e_onoff S_on S_off`` kept where ``>= t_s``;
-    ``G = S (*) ones/9``.
+    ``G = S (*) ones/9``. ``out[0] = sum G`` (set to 0 by the caller).
     """
     H, W = on.shape[0], on.shape[1]
     kk = ti.Vector([k1, k2])
@@ -270,7 +272,7 @@ def lgmd1_layers(
         i, j0, j1 = block_span(k, W, blocks)
         row_runs(_lgmd1_run, (on, off, on_p, off_p, I_on, E_off, S, kk, a, w_i_on, w_i_off, e, t_s),
                  i, j0, j1, H, W, "sum", 1)
-    return _group(S, G, blocks)
+    _group(S, G, blocks, out)
 
 
 # -- F-LGMD: instantaneous feedback solved as a fixed point -----------------------------
@@ -358,29 +360,28 @@ def flgmd_iterate(
     on0: F2, off0: F2, on: F2, off: F2, q_on: F2, q_off: F2, on_n: F2, off_n: F2,
     wn0: ti.f32, wn1: ti.f32, wn2: ti.f32, wf0: ti.f32, wf1: ti.f32, wf2: ti.f32,
     beta_on: ti.f32, beta_off: ti.f32, lam: ti.f32, mom: ti.f32, blocks: ti.i32, with_off: ti.template(),
-) -> ti.types.vector(2, ti.f32):
+    out: D1,
+):
     """One fixed-point update ``X_n = X + mom (X - X_n) + lam (T(X) - X)``, ``T(X) = [X0 + beta S_X(X)]+``.
 
     ``on_n``/``off_n`` hold the iterate before ``X`` on entry (used when ``mom != 0``:
     a Chebyshev step; ``mom = 0``: plain relaxation).
     ``wn``/``wf``: ``(centre, edge, diagonal)`` of ``W_x`` for the ON/OFF channel
-    (:meth:`cdnf_ti.models.flgmd.FLGMDParams.feedback_stencils`). Returns
-    ``(max|T(ON) - ON|, max|T(OFF) - OFF|)``. With ``with_off`` False
-    (``beta_off == 0``) the OFF channel equals its drive and is not iterated.
+    (:meth:`cdnf_ti.models.flgmd.FLGMDParams.feedback_stencils`). The residuals
+    ``out[0] = max|T(ON) - ON|``, ``out[1] = max|T(OFF) - OFF|`` (both set to 0 by the
+    caller). With ``with_off`` False (``beta_off == 0``) the OFF channel equals its
+    drive and is not iterated (``out[1]`` stays 0).
     """
     H, W = on.shape[0], on.shape[1]
     wn = ti.Vector([wn0, wn1, wn2])
     wf = ti.Vector([wf0, wf1, wf2])
-    r_on = 0.0
-    r_off = 0.0
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        ti.atomic_max(r_on, ti.cast(row_runs(_iterate_run, (on0, on, q_on, on_n, wn, beta_on, lam, mom),
-                                             i, j0, j1, H, W, "max", 1), ti.f32))
+        ti.atomic_max(out[0], row_runs(_iterate_run, (on0, on, q_on, on_n, wn, beta_on, lam, mom),
+                                       i, j0, j1, H, W, "max", 1))
         if ti.static(with_off):
-            ti.atomic_max(r_off, ti.cast(row_runs(_iterate_run, (off0, off, q_off, off_n, wf, beta_off, lam, mom),
-                                                  i, j0, j1, H, W, "max", 1), ti.f32))
-    return ti.Vector([r_on, r_off])
+            ti.atomic_max(out[1], row_runs(_iterate_run, (off0, off, q_off, off_n, wf, beta_off, lam, mom),
+                                           i, j0, j1, H, W, "max", 1))
 
 
 @ti.func
@@ -399,17 +400,17 @@ def _finish_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
 def flgmd_finish(
     on: F2, off: F2, q_on: F2, q_off: F2, S_on: F2, S_off: F2, S: F2, G: F2,
     wn0: ti.f32, wn1: ti.f32, wn2: ti.f32, wf0: ti.f32, wf1: ti.f32, wf2: ti.f32,
-    t_s: ti.f32, blocks: ti.i32,
-) -> ti.f64:
+    t_s: ti.f32, blocks: ti.i32, out: D1,
+):
     """Local summation at the fixed point, ``S = S_on + S_off`` kept where ``>= t_s``,
-    ``G = S (*) ones/9``; returns ``sum G``."""
+    ``G = S (*) ones/9``; ``out[0] = sum G`` (set to 0 by the caller)."""
     H, W = on.shape[0], on.shape[1]
     wn = ti.Vector([wn0, wn1, wn2])
     wf = ti.Vector([wf0, wf1, wf2])
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
         row_runs(_finish_run, (on, off, q_on, q_off, S_on, S_off, S, wn, wf, t_s), i, j0, j1, H, W, "sum", 1)
-    return _group(S, G, blocks)
+    _group(S, G, blocks, out)
 
 
 # -- F-LGMD on lane fields (the fast CPU path) ------------------------------------------
@@ -446,10 +447,11 @@ def lgmd_lanes_load(
     c_on: ti.i32, s_on: ti.i32, c_off: ti.i32, s_off: ti.i32, scale: ti.f32, first: ti.i32, clip: ti.f32,
     dc: ti.f32, W: ti.template(), blocks: ti.i32, feedback: ti.template(), on0: ti.template(),
     off0: ti.template(), q_on: ti.template(), q_off: ti.template(), qn1: ti.f32, qn2: ti.f32, qf1: ti.f32,
-    qf2: ti.f32,
-) -> ti.f64:
+    qf2: ti.f32, out: D1,
+):
     """:func:`load_frame` on lane fields: photoreceptors ``L``/``P`` and the ON/OFF channels,
-    ``on[s_on] = P [P >= clip] + dc on[c_on]`` (same for OFF); returns ``sum |P|``.
+    ``on[s_on] = P [P >= clip] + dc on[c_on]`` (same for OFF); adds ``sum |P|`` to ``out[0]``
+    (set to 0 by the caller).
 
     With ``feedback`` (F-LGMD) it also does :func:`flgmd_prepare`: the drives
     ``on0``/``off0`` (= the iterate's start ``on[s_on]``/``off[s_off]``) and
@@ -460,7 +462,6 @@ def lgmd_lanes_load(
     H = L.shape[0]
     E1 = ti.static((LANES + W - 1) // LANES)
     keep = ti.select(first != 0, 0.0, 1.0)
-    total = ti.f64(0.0)
     for k in range(H * blocks):
         i, e0, e1 = _lane_span(k, E1, blocks)
         im = ti.max(i - 1, 0)
@@ -484,8 +485,7 @@ def lgmd_lanes_load(
             acc += ti.cast((ti.abs(p) * lane_mask(e, W)).sum(), ti.f64)
         fill_ghosts(on, s_on, i, e0 == 1, e1 == E1 + 1, W, 1, REPLICATE)
         fill_ghosts(off, s_off, i, e0 == 1, e1 == E1 + 1, W, 1, REPLICATE)
-        ti.atomic_add(total, acc)
-    return total
+        ti.atomic_add(out[0], acc)
 
 
 @ti.func
@@ -575,8 +575,8 @@ def flgmd_lanes_solve(
     wn0: ti.f32, wn1: ti.f32, wn2: ti.f32, wf0: ti.f32, wf1: ti.f32, wf2: ti.f32,
     beta_on: ti.f32, beta_off: ti.f32, t_s: ti.f32, coef: ti.types.ndarray(dtype=ti.f32, ndim=2), n: ti.i32,
     tol: ti.f32, grow: ti.f32, nw: ti.i32, sync: ti.template(), rbuf: ti.template(), msum: ti.template(),
-    W: ti.template(), with_off: ti.template(),
-) -> ti.types.vector(2 * MAX_STEPS + 1, ti.f64):
+    W: ti.template(), with_off: ti.template(), out: D1,
+):
     """Up to ``n`` feedback updates (:func:`flgmd_lanes_iterate`) in one launch, then the layers.
 
     Update ``j`` uses ``lam = coef[j, 0]``, ``mom = coef[j, 1]`` and reads buffers
@@ -584,9 +584,10 @@ def flgmd_lanes_solve(
     iterated only ``with_off``. The updates stop after the first one whose residuals are
     both ``<= tol``, or one whose worst residual exceeds ``grow`` times the best of the
     launch. When the launch converged, the workers compute ``S_on``, ``S_off``, ``S`` and
-    ``G`` of the result (as :func:`flgmd_lanes_finish`). Returns ``(on_0, off_0, on_1,
-    off_1, ...)``, the residuals of each update (-1: not run), then ``sum G`` (-1 when
-    the launch did not converge).
+    ``G`` of the result (as :func:`flgmd_lanes_finish`). Writes every element of ``out``
+    (length ``2 MAX_STEPS + 1``) in its serial tail: ``out[2 j]``, ``out[2 j + 1]``: the
+    ON and OFF residuals of update ``j`` (-1: not run); ``out[2 MAX_STEPS]``: ``sum G``
+    (-1 when the launch did not converge).
     """
     H = on0.shape[0]
     wn = ti.Vector([wn0, wn1, wn2])
@@ -646,14 +647,12 @@ def flgmd_lanes_solve(
                     ti.atomic_add(msum[0], acc)
                     finish_rows(sync, GROUP_PHASE, i1 - i0)
                 msum[1] = 1.0
-    out = ti.Vector([0.0] * (2 * MAX_STEPS + 1), dt=ti.f64)
     for j in ti.static(range(MAX_STEPS)):
         out[2 * j] = ti.cast(rbuf[j, 0], ti.f64)
         out[2 * j + 1] = ti.cast(rbuf[j, 1], ti.f64)
     out[2 * MAX_STEPS] = -1.0
     if msum[1] > 0.0:  # the layers were computed (the workers have all finished here)
         out[2 * MAX_STEPS] = msum[0]
-    return out
 
 
 @ti.kernel
@@ -661,8 +660,10 @@ def flgmd_lanes_finish(
     on: ti.template(), off: ti.template(), f_on: ti.i32, f_off: ti.i32, q_on: ti.template(), q_off: ti.template(),
     S_on: ti.template(), S_off: ti.template(), S: ti.template(), G: ti.template(),
     wn0: ti.f32, wn1: ti.f32, wn2: ti.f32, wf0: ti.f32, wf1: ti.f32, wf2: ti.f32, t_s: ti.f32, W: ti.template(),
-) -> ti.f64:
-    """:func:`flgmd_finish` on lane fields (channels: buffers ``f_on``/``f_off``); returns ``sum G``.
+    out: D1,
+):
+    """:func:`flgmd_finish` on lane fields (channels: buffers ``f_on``/``f_off``); ``out[0] = sum G``
+    (set to 0 by the caller).
 
     For a frame whose solve launch did not converge (:func:`flgmd_lanes_solve` computes
     the layers itself when it does).
@@ -672,10 +673,8 @@ def flgmd_lanes_finish(
     wf = ti.Vector([wf0, wf1, wf2])
     for i in range(H):
         _lane_finish_row(on, off, f_on, f_off, q_on, q_off, S_on, S_off, S, i, H, wn, wf, t_s, W)
-    total = ti.f64(0.0)
     for i in range(H):
-        total += _lane_box_row(S, G, i, H, W, "sum")
-    return total
+        ti.atomic_add(out[0], _lane_box_row(S, G, i, H, W, "sum"))
 
 
 # -- LGMD2 on lane fields: the layers of a frame in one launch ---------------------------
@@ -709,10 +708,13 @@ def lgmd2_lanes_layers(
     kn0: ti.f32, kn1: ti.f32, kn2: ti.f32, an0: ti.f32, an1: ti.f32, an2: ti.f32,
     kf0: ti.f32, kf1: ti.f32, kf2: ti.f32, af0: ti.f32, af1: ti.f32, af2: ti.f32,
     e_on: ti.f32, e_off: ti.f32, e_onoff: ti.f32, delta_c: ti.f32, c_w: ti.f32, c_de: ti.f32, t_de: ti.f32,
-    nw: ti.i32, sync: ti.template(), rbuf: ti.template(), msum: ti.template(), W: ti.template(),
-) -> VEC2D:
+    nw: ti.i32, sync: ti.template(), rbuf: ti.template(), msum: ti.template(), W: ti.template(), out: D1,
+):
     """:func:`lgmd2_layers` on lane fields, in one launch by persistent workers (channels:
-    buffer ``c`` of ``on``/``off`` now, ``q`` the frame before); returns ``(sum G, max |Ce|)``."""
+    buffer ``c`` of ``on``/``off`` now, ``q`` the frame before).
+
+    Writes ``out[0] = sum G``, ``out[1] = max |Ce|`` in its serial tail.
+    """
     H = S.shape[0]
     kn = ti.Vector([kn0, kn1, kn2])
     an = ti.Vector([an0, an1, an2])
@@ -756,4 +758,5 @@ def lgmd2_lanes_layers(
                         acc += ti.cast((g * lane_mask(e, W)).sum(), ti.f64)
                 ti.atomic_add(msum[0], acc)
                 finish_rows(sync, 2, i1 - i0)
-    return ti.Vector([msum[0], ti.cast(ti.max(rbuf[0, 0], 0.0), ti.f64)])
+    out[0] = msum[0]
+    out[1] = ti.cast(ti.max(rbuf[0, 0], 0.0), ti.f64)

@@ -1,10 +1,12 @@
 """Taichi kernels of the SDNF reconstruction (single field, float32 state).
 
 Two launches per frame: :func:`load_binary` (binary pre-processing of the
-luminance change, returning the active-pixel count) and :func:`field_update`
+luminance change, with the active-pixel count) and :func:`field_update`
 (time-delayed lateral interaction: the DoG acts on the previous frame's
 field, so each frame is one explicit update, no iteration). The DoG is applied
-as separable row/column passes with a replicate border. NumPy float64 oracle:
+as separable row/column passes with a replicate border. The kernels return no
+value: their sums go to ``out``, a float64 NumPy array that the caller zeroes
+before the launch (see :mod:`cdnf_ti.kernels.lgmd`). NumPy float64 oracle:
 :class:`cdnf_ti.baselines_reference.NumpySDNFBackend`.
 """
 
@@ -27,6 +29,7 @@ ti = dsl()  # taichi or quadrants: the same DSL
 
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
+D1 = ti.types.ndarray(dtype=ti.f64, ndim=1)  # a launch's results ``out``, set by the caller before it
 
 
 @ti.func
@@ -41,16 +44,14 @@ def _load_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
 
 @ti.kernel
 def load_binary(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, E: F2, scale: ti.f32, first: ti.i32,
-                t_b: ti.f32, blocks: ti.i32) -> ti.f64:
+                t_b: ti.f32, blocks: ti.i32, out: D1):
     """``g = frame * scale`` in [0, 1]; ``P = g - L`` (0 when ``first``); ``E = [|P| >= t_b]``;
-    returns ``sum E``."""
+    adds ``sum E`` to ``out[0]`` (set to 0 by the caller)."""
     H, W = L.shape[0], L.shape[1]
     keep = ti.select(first != 0, 0.0, 1.0)
-    total = ti.f64(0.0)
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        ti.atomic_add(total, row_runs(_load_run, (frame, L, P, E, scale, keep, t_b), i, j0, j1, H, W, "sum", 1))
-    return total
+        ti.atomic_add(out[0], row_runs(_load_run, (frame, L, P, E, scale, keep, t_b), i, j0, j1, H, W, "sum", 1))
 
 
 @ti.func
@@ -75,19 +76,17 @@ def _update_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
 @ti.kernel
 def field_update(
     E: F2, F: F2, row1: F2, row2: F2, u_new: F2, F_new: F2, g1: F1, g2: F1,
-    A: ti.f32, B_t: ti.f32, h: ti.f32, theta_scale: ti.f32, blocks: ti.i32, R: ti.template(),
-) -> ti.f64:
+    A: ti.f32, B_t: ti.f32, h: ti.f32, theta_scale: ti.f32, blocks: ti.i32, R: ti.template(), out: D1,
+):
     """``u_new = E - h + vartheta(A g1g1 (*) F - B_t g2g2 (*) F)``, ``F_new = f(u_new)``;
-    returns ``sum F_new``.
+    adds ``sum F_new`` to ``out[0]`` (set to 0 by the caller).
 
     ``F = f(u(t-1))`` is the previous frame's firing rate (time-delayed lateral
     interaction); ``vartheta(a) = tanh(a / 2)``; ``R``: the DoG radius (``g1``/``g2`` have ``2R + 1`` taps).
     """
     H, W = F.shape[0], F.shape[1]
     dog_row_pass(F, row1, row2, g1, g2, blocks, REPLICATE, R)
-    total = ti.f64(0.0)
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        ti.atomic_add(total, row_runs(_update_run, (E, row1, row2, u_new, F_new, g1, g2, A, B_t, h, theta_scale, R),
-                                      i, j0, j1, H, W, "sum", 1))
-    return total
+        ti.atomic_add(out[0], row_runs(_update_run, (E, row1, row2, u_new, F_new, g1, g2, A, B_t, h, theta_scale, R),
+                                       i, j0, j1, H, W, "sum", 1))

@@ -205,6 +205,8 @@ class TaichiFLGMDBackend(TaichiLGMDBackend):
         self.q_on, self.q_off = self._nd(), self._nd()
         self.a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
         self.w_on, self.w_off = p.feedback_stencils(dt)
+        self._iterate_out = np.zeros(2)  # flgmd_iterate's residuals of ON, OFF
+        self._finish_out = np.zeros(1)  # flgmd_finish's sum G
 
     def reset(self) -> None:
         super().reset()
@@ -228,21 +230,26 @@ class TaichiFLGMDBackend(TaichiLGMDBackend):
         p = self.params
         c, n = self.c, self.ni
         with_off = p.beta_off != 0.0
-        r = self.K.flgmd_iterate(self.on0, self.off0, self.on[c], self.off[c], self.q_on, self.q_off,
-                                 self.on[n], self.off[n], *self.w_on, *self.w_off,
-                                 p.beta_on, p.beta_off, lam, mom, self.blocks, with_off)
+        out = self._iterate_out
+        out.fill(0.0)
+        self.K.flgmd_iterate(self.on0, self.off0, self.on[c], self.off[c], self.q_on, self.q_off,
+                             self.on[n], self.off[n], *self.w_on, *self.w_off,
+                             p.beta_on, p.beta_off, lam, mom, self.blocks, with_off, out)
         if with_off:
             self.c, self.ni = n, c
         else:
             # only ON was iterated: swap the ON buffers, keep OFF in place
             self.on[c], self.on[n] = self.on[n], self.on[c]
-        return float(r[0]), float(r[1])
+        return float(out[0]), float(out[1])
 
     def finish(self) -> float:
         p = self.params
         c = self.c
-        return float(self.K.flgmd_finish(self.on[c], self.off[c], self.q_on, self.q_off, self.S_on, self.S_off,
-                                         self.S, self.G, *self.w_on, *self.w_off, p.t_s, self.blocks))
+        out = self._finish_out
+        out.fill(0.0)
+        self.K.flgmd_finish(self.on[c], self.off[c], self.q_on, self.q_off, self.S_on, self.S_off,
+                            self.S, self.G, *self.w_on, *self.w_off, p.t_s, self.blocks, out)
+        return float(out[0])
 
     def hold(self) -> None:
         """FFI-held frame: the channels keep their previous values (nothing to do)."""
@@ -272,6 +279,8 @@ class LaneTaichiFLGMDBackend(LaneTaichiLGMDBackend):
         self.steps = self.K.MAX_STEPS  # updates per solve launch (feedback_iterate_many)
         self._tol32 = float(np.float32(p.tol))
         self._sum_g: float | None = None  # sum G computed by a converged solve launch
+        self._solve_out = np.zeros(2 * self.steps + 1)  # flgmd_lanes_solve's residuals per update, sum G
+        self._finish_out = np.zeros(1)  # flgmd_lanes_finish's sum G
         a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
         # edge and diagonal weights of Q = w_i sum K (1 - a) X(t-1), per channel
         self.q_weights = tuple(w * k * (1.0 - x) for w in (p.w_i_on, p.w_i_off) for k, x in zip(p.k_lateral, a))
@@ -310,18 +319,20 @@ class LaneTaichiFLGMDBackend(LaneTaichiLGMDBackend):
         with_off = p.beta_off != 0.0
         cur = list(self.iterate)
         other = [3 - self.settled[k] - cur[k] for k in range(2)]  # the third buffer: the iterate before
-        r = self.K.flgmd_lanes_solve(ws.on0, ws.off0, ws.on, ws.off, ws.q_on, ws.q_off, ws.S_on, ws.S_off, ws.S, ws.G,
-                                     cur[0], other[0], cur[1], other[1], *self.w_on, *self.w_off, p.beta_on,
-                                     p.beta_off, p.t_s, ws.coef, len(coefs), self._tol32, RESTART_GROWTH, self.nw,
-                                     ws.sync, ws.rbuf, ws.msum, self.W, with_off)
+        out = self._solve_out
+        out.fill(-1.0)  # not run / not converged (the kernel writes every element)
+        self.K.flgmd_lanes_solve(ws.on0, ws.off0, ws.on, ws.off, ws.q_on, ws.q_off, ws.S_on, ws.S_off, ws.S, ws.G,
+                                 cur[0], other[0], cur[1], other[1], *self.w_on, *self.w_off, p.beta_on,
+                                 p.beta_off, p.t_s, ws.coef, len(coefs), self._tol32, RESTART_GROWTH, self.nw,
+                                 ws.sync, ws.rbuf, ws.msum, self.W, with_off, out)
         res = []
         for j in range(len(coefs)):
-            if min(r[2 * j], r[2 * j + 1]) < 0.0:  # not run
+            if min(out[2 * j], out[2 * j + 1]) < 0.0:  # not run
                 break
-            res.append((float(r[2 * j]), float(r[2 * j + 1])))
+            res.append((float(out[2 * j]), float(out[2 * j + 1])))
         if len(res) % 2:
             self.iterate = [other[0], other[1] if with_off else cur[1]]
-        self._sum_g = float(r[2 * self.K.MAX_STEPS]) if r[2 * self.K.MAX_STEPS] >= 0.0 else None
+        self._sum_g = float(out[2 * self.K.MAX_STEPS]) if out[2 * self.K.MAX_STEPS] >= 0.0 else None
         return res
 
     def finish(self) -> float:
@@ -331,8 +342,11 @@ class LaneTaichiFLGMDBackend(LaneTaichiLGMDBackend):
             return self._sum_g
         ws = self._acquire()
         p = self.params
-        return float(self.K.flgmd_lanes_finish(ws.on, ws.off, *self.settled, ws.q_on, ws.q_off, ws.S_on, ws.S_off,
-                                               ws.S, ws.G, *self.w_on, *self.w_off, p.t_s, self.W))
+        out = self._finish_out
+        out.fill(0.0)
+        self.K.flgmd_lanes_finish(ws.on, ws.off, *self.settled, ws.q_on, ws.q_off, ws.S_on, ws.S_off,
+                                  ws.S, ws.G, *self.w_on, *self.w_off, p.t_s, self.W, out)
+        return float(out[0])
 
     def hold(self) -> None:
         """FFI-held frame: the channels keep their previous values (nothing to do)."""

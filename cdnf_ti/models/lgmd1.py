@@ -110,15 +110,18 @@ class TaichiLGMD1Backend(TaichiLGMDBackend):
     def _setup(self) -> None:
         p, dt = self.params, self.dt
         self.a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
+        self._layers_out = np.zeros(1)  # lgmd1_layers' sum G
 
     def layers(self) -> float:
         """Delayed spreads, S (thresholded), G (ON/OFF from :meth:`load`); returns ``sum G``."""
         p = self.params
         c, q = self._next_buffers()
-        r = self.K.lgmd1_layers(self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.E_off,
-                                self.S, self.G, p.w_i_on, p.w_i_off, *p.k_lateral, *self.a,
-                                p.w_on_exc, p.w_off_exc, p.w_onoff, p.t_s, self.blocks)
-        return float(r)
+        out = self._layers_out
+        out.fill(0.0)
+        self.K.lgmd1_layers(self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.E_off,
+                            self.S, self.G, p.w_i_on, p.w_i_off, *p.k_lateral, *self.a,
+                            p.w_on_exc, p.w_off_exc, p.w_onoff, p.t_s, self.blocks, out)
+        return float(out[0])
 
 
 @register_model

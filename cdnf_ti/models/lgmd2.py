@@ -197,6 +197,7 @@ class TaichiLGMDBackend:
         self.blocks = column_blocks(self.shape[1], arch)  # work items per row
         self.dt = dt
         self._arrays: list[Any] = []
+        self._load_out = np.zeros(1)  # load_frame's sum |P|
         self.L, self.P = self._nd(), self._nd()
         self.on = [self._nd() for _ in range(self.CHANNEL_BUFFERS)]
         self.off = [self._nd() for _ in range(self.CHANNEL_BUFFERS)]
@@ -224,8 +225,11 @@ class TaichiLGMDBackend:
         """Photoreceptors and this frame's ON/OFF channels (into :meth:`_channel_targets`); returns ``sum |P|``."""
         scale = 1.0 if grey.dtype == np.uint8 else 255.0
         p = self.params
-        return float(self.K.load_frame(grey, self.L, self.P, *self._channel_targets(), scale, int(first),
-                                       p.clip, p.dc, self.blocks))
+        out = self._load_out
+        out.fill(0.0)
+        self.K.load_frame(grey, self.L, self.P, *self._channel_targets(), scale, int(first), p.clip, p.dc,
+                          self.blocks, out)
+        return float(out[0])
 
     def _channel_targets(self) -> tuple[Any, Any, Any, Any]:
         """``(ON, OFF, ON(t-1), OFF(t-1))`` buffers of :meth:`load`: the next ping-pong buffers,
@@ -256,16 +260,19 @@ class TaichiLGMD2Backend(TaichiLGMDBackend):
         p, dt = self.params, self.dt
         self.an = tuple(lowpass_coefficient(dt, t) for t in p.tau_on)
         self.af = tuple(lowpass_coefficient(dt, t) for t in p.tau_off)
+        self._layers_out = np.zeros(2)  # lgmd2_layers' sum G, max |Ce|
 
     def layers(self, w_on: float, w_off: float) -> tuple[float, float]:
         """Delayed inhibition, S, grouping (ON/OFF from :meth:`load`); returns ``(sum G, max |Ce|)``."""
         p = self.params
         c, q = self._next_buffers()
-        r = self.K.lgmd2_layers(self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.I_off,
-                                self.S, self.Ce, self.G, w_on, w_off,
-                                *p.k_on, *self.an, *p.k_off, *self.af, p.w_on_exc, p.w_off_exc, p.w_onoff,
-                                p.delta_c, p.c_w, p.c_de, p.t_de, self.blocks)
-        return float(r[0]), float(r[1])
+        out = self._layers_out
+        out.fill(0.0)
+        self.K.lgmd2_layers(self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.I_off,
+                            self.S, self.Ce, self.G, w_on, w_off,
+                            *p.k_on, *self.an, *p.k_off, *self.af, p.w_on_exc, p.w_off_exc, p.w_onoff,
+                            p.delta_c, p.c_w, p.c_de, p.t_de, self.blocks, out)
+        return float(out[0]), float(out[1])
 
 
 class LGMDLanes(SharedWorkspace):
@@ -341,6 +348,7 @@ class LaneTaichiLGMDBackend:
         self.ws = self.workspace_type.get(self.shape)
         self.lock = self.ws.lock
         self._saved: dict[str, np.ndarray] | None = None
+        self._load_out = np.zeros(1)  # lgmd_lanes_load's sum |P|
         self._setup()
         with self.lock:
             self.reset()
@@ -382,8 +390,11 @@ class LaneTaichiLGMDBackend:
         p = self.params
         scale = 1.0 if grey.dtype == np.uint8 else 255.0
         extra = feedback or (ws.P, ws.P, ws.P, ws.P, 0.0, 0.0, 0.0, 0.0)  # not read without feedback
-        return float(self.K.lgmd_lanes_load(grey, ws.L, ws.P, ws.on, ws.off, c_on, s_on, c_off, s_off, scale,
-                                             int(first), p.clip, p.dc, self.W, self.BLOCKS, bool(feedback), *extra))
+        out = self._load_out
+        out.fill(0.0)
+        self.K.lgmd_lanes_load(grey, ws.L, ws.P, ws.on, ws.off, c_on, s_on, c_off, s_off, scale, int(first),
+                               p.clip, p.dc, self.W, self.BLOCKS, bool(feedback), *extra, out)
+        return float(out[0])
 
     def _channel_buffers(self) -> tuple[int, int]:
         """Buffers of the ON and OFF channels that :meth:`fields` shows."""
@@ -413,6 +424,7 @@ class LaneTaichiLGMD2Backend(LaneTaichiLGMDBackend):
         p, dt = self.params, self.dt
         self.an = tuple(lowpass_coefficient(dt, t) for t in p.tau_on)
         self.af = tuple(lowpass_coefficient(dt, t) for t in p.tau_off)
+        self._layers_out = np.zeros(2)  # lgmd2_lanes_layers' sum G, max |Ce|
 
     def _reset_buffers(self) -> None:
         self.c = 0  # the current ON/OFF buffers; load writes the other ones
@@ -426,10 +438,12 @@ class LaneTaichiLGMD2Backend(LaneTaichiLGMDBackend):
         ws = self._acquire()
         p = self.params
         q, self.c = self.c, 1 - self.c
-        r = self.K.lgmd2_lanes_layers(ws.on, ws.off, self.c, q, ws.I_on, ws.I_off, ws.S, ws.Ce, ws.G, w_on, w_off,
-                                      *p.k_on, *self.an, *p.k_off, *self.af, p.w_on_exc, p.w_off_exc, p.w_onoff,
-                                      p.delta_c, p.c_w, p.c_de, p.t_de, self.nw, ws.sync, ws.rbuf, ws.msum, self.W)
-        return float(r[0]), float(r[1])
+        out = self._layers_out
+        out.fill(0.0)
+        self.K.lgmd2_lanes_layers(ws.on, ws.off, self.c, q, ws.I_on, ws.I_off, ws.S, ws.Ce, ws.G, w_on, w_off,
+                                  *p.k_on, *self.an, *p.k_off, *self.af, p.w_on_exc, p.w_off_exc, p.w_onoff,
+                                  p.delta_c, p.c_w, p.c_de, p.t_de, self.nw, ws.sync, ws.rbuf, ws.msum, self.W, out)
+        return float(out[0]), float(out[1])
 
     def _channel_buffers(self) -> tuple[int, int]:
         return self.c, self.c

@@ -176,6 +176,8 @@ class TaichiSDNFBackend:
         self.g2 = ti.ndarray(ti.f32, g2.shape)
         self.g1.from_numpy(g1.astype(np.float32))
         self.g2.from_numpy(g2.astype(np.float32))
+        self._load_out = np.zeros(1)  # load_binary's sum E
+        self._update_out = np.zeros(1)  # field_update's sum F
         self.reset()
 
     def reset(self) -> None:
@@ -189,16 +191,20 @@ class TaichiSDNFBackend:
 
     def load(self, grey: np.ndarray, first: bool) -> float:
         scale = 1.0 / 255.0 if grey.dtype == np.uint8 else 1.0
-        n = self.K.load_binary(grey, self.L, self.P, self.E, scale, int(first), self.params.t_b, self.blocks)
-        return float(n) / (self.shape[0] * self.shape[1])
+        out = self._load_out
+        out.fill(0.0)
+        self.K.load_binary(grey, self.L, self.P, self.E, scale, int(first), self.params.t_b, self.blocks, out)
+        return float(out[0]) / (self.shape[0] * self.shape[1])
 
     def update(self, b_t: float) -> float:
         p = self.params
         c, n = self.c, 1 - self.c
-        s = self.K.field_update(self.E, self.F[c], self.row1, self.row2, self.u[n], self.F[n], self.g1, self.g2,
-                                p.A, b_t, p.h, THETA_SCALE, self.blocks, int(p.radius))
+        out = self._update_out
+        out.fill(0.0)
+        self.K.field_update(self.E, self.F[c], self.row1, self.row2, self.u[n], self.F[n], self.g1, self.g2,
+                            p.A, b_t, p.h, THETA_SCALE, self.blocks, int(p.radius), out)
         self.c = n
-        return float(s) / (self.shape[0] * self.shape[1])
+        return float(out[0]) / (self.shape[0] * self.shape[1])
 
     def fields(self) -> dict[str, np.ndarray]:
         return {"P": self.P.to_numpy(), "E": self.E.to_numpy(), "u": self.u[self.c].to_numpy(),
