@@ -41,6 +41,7 @@ from .common import (  # noqa: F401
     lane_mask,
     lanes_fill,
     luminance_change,
+    record_residuals,
     reset_sync,
     row_runs,
     run_load,
@@ -573,21 +574,21 @@ def flgmd_lanes_solve(
     q_off: ti.template(), S_on: ti.template(), S_off: ti.template(), S: ti.template(), G: ti.template(),
     p_on: ti.i32, n_on: ti.i32, p_off: ti.i32, n_off: ti.i32,
     wn0: ti.f32, wn1: ti.f32, wn2: ti.f32, wf0: ti.f32, wf1: ti.f32, wf2: ti.f32,
-    beta_on: ti.f32, beta_off: ti.f32, t_s: ti.f32, coef: ti.types.ndarray(dtype=ti.f32, ndim=2), n: ti.i32,
+    beta_on: ti.f32, beta_off: ti.f32, t_s: ti.f32, record: ti.types.ndarray(dtype=ti.f32, ndim=2), n: ti.i32,
     tol: ti.f32, grow: ti.f32, nw: ti.i32, sync: ti.template(), rbuf: ti.template(), msum: ti.template(),
     W: ti.template(), with_off: ti.template(), out: D1,
 ):
     """Up to ``n`` feedback updates (:func:`flgmd_lanes_iterate`) in one launch, then the layers.
 
-    Update ``j`` uses ``lam = coef[j, 0]``, ``mom = coef[j, 1]`` and reads buffers
+    Update ``j`` uses ``lam, mom = record[j, 0:2]`` and reads buffers
     ``p`` (``j`` even) or ``n`` (``j`` odd) of each channel, writing the other one; OFF is
     iterated only ``with_off``. The updates stop after the first one whose residuals are
     both ``<= tol``, or one whose worst residual exceeds ``grow`` times the best of the
     launch. When the launch converged, the workers compute ``S_on``, ``S_off``, ``S`` and
-    ``G`` of the result (as :func:`flgmd_lanes_finish`). Writes every element of ``out``
-    (length ``2 MAX_STEPS + 1``) in its serial tail: ``out[2 j]``, ``out[2 j + 1]``: the
-    ON and OFF residuals of update ``j`` (-1: not run); ``out[2 MAX_STEPS]``: ``sum G``
-    (-1 when the launch did not converge).
+    ``G`` of the result (as :func:`flgmd_lanes_finish`). In its serial tail it writes the ON
+    and OFF residuals of each update to ``record[j, 2:4]`` (-1: not run,
+    :class:`~cdnf_ti.kernels.common.LaunchRecord`) and ``sum G`` to ``out[0]`` (-1 when the
+    launch did not converge).
     """
     H = on0.shape[0]
     wn = ti.Vector([wn0, wn1, wn2])
@@ -603,8 +604,8 @@ def flgmd_lanes_solve(
                 go, best = gate(sync, rbuf, go, best, j, j - 1, H, tol, grow)
                 if go != 0:
                     ran = j + 1
-                    lam = coef[j, 0]
-                    mom = coef[j, 1]
+                    lam = record[j, 0]
+                    mom = record[j, 1]
                     src_on = ti.select(j % 2 == 0, p_on, n_on)
                     dst_on = p_on + n_on - src_on
                     src_off = ti.select(j % 2 == 0, p_off, n_off)
@@ -647,12 +648,10 @@ def flgmd_lanes_solve(
                     ti.atomic_add(msum[0], acc)
                     finish_rows(sync, GROUP_PHASE, i1 - i0)
                 msum[1] = 1.0
-    for j in ti.static(range(MAX_STEPS)):
-        out[2 * j] = ti.cast(rbuf[j, 0], ti.f64)
-        out[2 * j + 1] = ti.cast(rbuf[j, 1], ti.f64)
-    out[2 * MAX_STEPS] = -1.0
+    record_residuals(rbuf, record, 2)
+    out[0] = -1.0
     if msum[1] > 0.0:  # the layers were computed (the workers have all finished here)
-        out[2 * MAX_STEPS] = msum[0]
+        out[0] = msum[0]
 
 
 @ti.kernel

@@ -279,7 +279,10 @@ class LaneTaichiFLGMDBackend(LaneTaichiLGMDBackend):
         self.steps = self.K.MAX_STEPS  # updates per solve launch (feedback_iterate_many)
         self._tol32 = float(np.float32(p.tol))
         self._sum_g: float | None = None  # sum G computed by a converged solve launch
-        self._solve_out = np.zeros(2 * self.steps + 1)  # flgmd_lanes_solve's residuals per update, sum G
+        from ..kernels.common import LaunchRecord
+
+        self._record = LaunchRecord(2)  # flgmd_lanes_solve's coefficients in, residuals out
+        self._solve_out = np.zeros(1)  # flgmd_lanes_solve's sum G (-1: not converged)
         self._finish_out = np.zeros(1)  # flgmd_lanes_finish's sum G
         a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
         # edge and diagonal weights of Q = w_i sum K (1 - a) X(t-1), per channel
@@ -313,26 +316,18 @@ class LaneTaichiFLGMDBackend(LaneTaichiLGMDBackend):
         """
         ws = self._acquire()
         p = self.params
-        if not 1 <= len(coefs) <= self.steps:
-            raise ValueError(f"1..{self.steps} updates per launch, got {len(coefs)}")
-        ws.coef[: len(coefs)] = np.asarray(coefs, np.float32).reshape(-1, 2)
         with_off = p.beta_off != 0.0
         cur = list(self.iterate)
         other = [3 - self.settled[k] - cur[k] for k in range(2)]  # the third buffer: the iterate before
-        out = self._solve_out
-        out.fill(-1.0)  # not run / not converged (the kernel writes every element)
+        rec, out = self._record, self._solve_out
         self.K.flgmd_lanes_solve(ws.on0, ws.off0, ws.on, ws.off, ws.q_on, ws.q_off, ws.S_on, ws.S_off, ws.S, ws.G,
                                  cur[0], other[0], cur[1], other[1], *self.w_on, *self.w_off, p.beta_on,
-                                 p.beta_off, p.t_s, ws.coef, len(coefs), self._tol32, RESTART_GROWTH, self.nw,
-                                 ws.sync, ws.rbuf, ws.msum, self.W, with_off, out)
-        res = []
-        for j in range(len(coefs)):
-            if min(out[2 * j], out[2 * j + 1]) < 0.0:  # not run
-                break
-            res.append((float(out[2 * j]), float(out[2 * j + 1])))
+                                 p.beta_off, p.t_s, rec.start(coefs), len(coefs), self._tol32, RESTART_GROWTH,
+                                 self.nw, ws.sync, ws.rbuf, ws.msum, self.W, with_off, out)
+        res = rec.residuals(len(coefs))
         if len(res) % 2:
             self.iterate = [other[0], other[1] if with_off else cur[1]]
-        self._sum_g = float(out[2 * self.K.MAX_STEPS]) if out[2 * self.K.MAX_STEPS] >= 0.0 else None
+        self._sum_g = float(out[0]) if out[0] >= 0.0 else None
         return res
 
     def finish(self) -> float:

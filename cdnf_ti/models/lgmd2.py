@@ -300,7 +300,6 @@ class LGMDLanes(SharedWorkspace):
         self.sync = ti.field(ti.i32, sync_size())  # phase counters of the persistent workers
         self.rbuf = ti.field(ti.f32, (MAX_STEPS, 2))  # per-phase maxima (residuals, max |Ce|)
         self.msum = ti.field(ti.f64, 2)  # a launch's float64 sum, and a flag
-        self.coef = np.zeros((MAX_STEPS, 2), np.float32)  # (lam, mom) per update of a solve launch
 
 
 class LaneTaichiLGMDBackend:
