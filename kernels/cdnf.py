@@ -436,7 +436,7 @@ def lanes_contrast_solve(
     tau: ti.f32, tol: ti.f32, grow: ti.f32, nw: ti.i32, sync: ti.template(), rbuf: ti.template(),
     W: ti.template(), mode: ti.template(),
     S: ti.template(), pend_s: ti.template(), alpha_on: ti.f32, alpha_off: ti.f32, theta_scale: ti.f32,
-) :
+):
     """Up to ``n`` ON/OFF updates (:func:`field_update`) in one launch, by persistent workers.
 
     Update ``j`` reads buffer ``(c + j) % 2`` of ``u_on``/``u_off`` and writes the other
@@ -534,13 +534,13 @@ def lanes_summation_kernel(g1: tuple, g2: tuple):
         S: ti.template(), v: ti.template(), row1: ti.template(), row2: ti.template(), pend: ti.template(),
         c: ti.i32, A: ti.f32, B: ti.f32, h: ti.f32, record: RECORD, n: ti.i32,
         tau: ti.f32, tol: ti.f32, grow: ti.f32, nw: ti.i32, sync: ti.template(), rbuf: ti.template(),
-        W: ti.template(), mode: ti.template(), theta_scale: ti.f32, msum: ti.template(), mean: D1,
+        W: ti.template(), mode: ti.template(), theta_scale: ti.f32, msum: ti.template(), total: D1,
     ):
         """Lane-vectorised :func:`summation_solve` by persistent workers: separable DoG, same equations.
 
         The residuals go to ``record`` (as :func:`lanes_contrast_solve`), and
-        ``mean_xy theta([v]+)`` of the result, when the launch converged, to ``mean[0]``
-        (else -1).
+        ``sum_xy theta([v]+)`` of the result (float64), when the launch converged, to
+        ``total[0]`` (else -1), as :func:`lanes_mean_activation` computes it.
         """
         H = S.shape[0]
         E1 = (LANES + W - 1) // LANES
@@ -624,8 +624,8 @@ def lanes_summation_kernel(g1: tuple, g2: tuple):
                         ti.atomic_add(msum[0], acc)
                     msum[1] = 1.0
         record_residuals(rbuf, record, 1)
-        mean[0] = -1.0
-        if msum[1] > 0.0:  # the mean was computed (the workers have all finished here)
-            mean[0] = msum[0] / ti.f64(H * W)
+        total[0] = -1.0
+        if msum[1] > 0.0:  # the sum was computed (the workers have all finished here)
+            total[0] = msum[0]
 
     return lanes_summation_solve

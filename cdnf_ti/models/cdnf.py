@@ -48,7 +48,7 @@ class TaichiCDNFBackend:
         self.blocks = column_blocks(self.shape[1], arch)  # work items per row
         self._tol32 = float(np.float32(params.tol))
         self._records = {"c": LaunchRecord(2), "s": LaunchRecord(1)}  # contrast, Summation launches
-        self.steps = dict(self.launch_steps(arch))
+        self.steps = self.launch_steps(arch)  # updates per launch, per group (tests may change them)
         self._total = np.zeros(1)  # the mean activation's float64 sum
 
         def nd() -> "ti.Ndarray":
@@ -203,7 +203,7 @@ class _LaneWorkspace(SharedWorkspace):
         self.rbuf = ti.field(ti.f32, (MAX_STEPS, 2))  # per-update residuals of a solve launch
         self.msum = ti.field(ti.f64, 2)  # sum theta([v]+) of a converged Summation solve, and its flag
         self.records = {"c": LaunchRecord(2), "s": LaunchRecord(1)}  # contrast, Summation launches
-        self.mean = np.zeros(1)  # mean theta([v]+) of a Summation launch (-1: not computed)
+        self.total = np.zeros(1)  # sum theta([v]+) of a Summation launch or mean_activation (-1: not computed)
 
     def all_active(self) -> None:
         """Mark every element of both groups pending (after any change made outside the kernels)."""
@@ -442,11 +442,11 @@ class LaneTaichiCDNFBackend:
         rec = ws.records["s"]
         kern(ws.S, ws.v, ws.row1, ws.row2, ws.pend["s"], s, p.A, p.B, p.h, rec.start(coefs), len(coefs),
              self.tau, self._tol32, RESTART_GROWTH, self.nw, ws.sync, ws.rbuf, self.W, self.mode, THETA_SCALE,
-             ws.msum, ws.mean)
+             ws.msum, ws.total)
         res = rec.residuals(len(coefs))
         self.s = (s + len(res)) % 2
-        mean = float(ws.mean[0])
-        self._mean = mean if mean >= 0.0 else None
+        total = float(ws.total[0])
+        self._mean = total / (self.H * self.W) if total >= 0.0 else None
         return res
 
     def mean_activation(self) -> float:
@@ -455,9 +455,9 @@ class LaneTaichiCDNFBackend:
         if self._mean is not None:
             mean, self._mean = self._mean, None
             return mean
-        ws.mean[0] = 0.0
-        self.K.lanes_mean_activation(ws.v, self.s, THETA_SCALE, self.W, ws.mean)
-        return float(ws.mean[0]) / (self.H * self.W)
+        ws.total[0] = 0.0
+        self.K.lanes_mean_activation(ws.v, self.s, THETA_SCALE, self.W, ws.total)
+        return float(ws.total[0]) / (self.H * self.W)
 
     def fields(self) -> dict[str, np.ndarray]:
         ws = self._acquire()
