@@ -4,8 +4,9 @@ Each peer is a backend with the same interface as
 :class:`cdnf_ti.reference.NumpyCDNFBackend` (``load``, ``contrast_iterate``,
 ``summation_input``, ``summation_iterate``, ``mean_activation``, ...), so
 :class:`PeerCDNF` drives it with exactly the model logic and fixed-point
-schedule of :class:`cdnf_ti.CDNF` (same tolerance, damping controller and warm
-start). Fields are float32, like the Taichi backend.
+schedule of :class:`cdnf_ti.CDNF` (same tolerance and damping controller), the
+paper's way: plain iteration, each frame starting from the previous frame's solution
+(``scheme="plain"``, ``start="previous"``). Fields are float32, like the Taichi backend.
 
 * ``scipy``: :func:`scipy.ndimage.correlate` (the 3x3 ``W_c`` and the 7x7 ``W_s``
   as dense 2-D correlations), NumPy ufuncs.
@@ -221,8 +222,8 @@ class PeerCDNF(CDNF):
         peers = available_peers()
         if peer not in peers:
             raise ValueError(f"peer {peer!r} is not available here; available: {', '.join(peers)}")
-        # the paper's plain scheme: the peers implement the relaxed update only
-        params = (params or CDNFParams()).replace(scheme="plain")
+        # the paper's plain scheme from the previous solution: the peers implement the relaxed update only
+        params = (params or CDNFParams()).replace(scheme="plain", start="previous")
         super().__init__(params, backend="numpy", fps=fps)
         self.peer = peer
         self._peer_cls = peers[peer]

@@ -11,6 +11,7 @@ from typing import Iterator
 import numpy as np
 
 from .params import CDNFParams, contrast_kernel, dog_kernel, resting_levels, theta, vartheta
+from .solver import cdnf_local_starts, local_start
 
 _PAD_MODE = {"replicate": "edge", "reflect": "reflect", "zero": "constant"}
 
@@ -100,10 +101,12 @@ class NumpyCDNFBackend(RestingFields):
         self.v = np.full(self.shape, v0)
         self.S = np.zeros(self.shape)
         self.prev_on = self.prev_off = self.prev_v = None  # previous iterates (Chebyshev momentum)
+        self.start = cdnf_local_starts(params) if params.start == "local" else None  # (2, 7) or None
 
     # -- state -----------------------------------------------------------
     def load(self, grey: np.ndarray, first: bool) -> None:
-        """Take a new frame: ``P = L(t) - L(t-1)`` (0 on the first frame).
+        """Take a new frame: ``P = L(t) - L(t-1)`` (0 on the first frame); with the local start
+        (``params.start == "local"``), ``u_on = start(P_on)``, ``u_off = start(P_off)``.
 
         ``grey`` is (H, W), uint8 (0..255) or float in [0, 1].
         """
@@ -112,6 +115,9 @@ class NumpyCDNFBackend(RestingFields):
             g /= 255.0
         self.P = np.zeros(self.shape) if first else g - self.L
         self.L = g
+        if self.start is not None:
+            self.u_on = local_start(np.maximum(self.P, 0.0), self.start[0])
+            self.u_off = local_start(np.maximum(-self.P, 0.0), self.start[0])
 
     def clear_input(self) -> None:
         self.P = np.zeros(self.shape)
@@ -140,11 +146,14 @@ class NumpyCDNFBackend(RestingFields):
         return u + mom * (u - prev) + lam * d
 
     def summation_input(self) -> None:
-        """``S = alpha_on theta([u_on]+) + alpha_off theta([u_off]+)``."""
+        """``S = alpha_on theta([u_on]+) + alpha_off theta([u_off]+)``; with the local start,
+        ``v = start(S)``."""
         p = self.params
         self.S = p.alpha_on * theta(np.maximum(self.u_on, 0.0)) + p.alpha_off * theta(
             np.maximum(self.u_off, 0.0)
         )
+        if self.start is not None:
+            self.v = local_start(self.S, self.start[1])
 
     def summation_iterate(self, lam: float, mom: float = 0.0) -> tuple[float]:
         """One update of the Summation field (as :meth:`contrast_iterate`); returns its residual."""

@@ -279,3 +279,68 @@ def iter_schedule(bounds: tuple[float, float]) -> Iterator[Coef]:
     s = ChebyshevSchedule(*bounds)
     while True:
         yield s.next()
+
+
+# -- the local start ------------------------------------------------------------------------
+#: Coefficients of one field's local start: ``(g0, x_max, 2 / x_max, q0, q1, q2, q3)``.
+START_COEFS = 7
+
+
+def local_start_coefficients(h: float, gain: float, x_max: float) -> np.ndarray:
+    """A cubic-times-x fit of :func:`~cdnf_ti.params.stationary_level` over ``[0, x_max]``.
+
+    ``start(x) = g0 + x q(t)`` with ``x`` clipped to ``[0, x_max]``, ``t = 2 x / x_max - 1``
+    and ``q`` a cubic in ``t``: exact at ``x = 0`` (``g0`` is the resting level, so a
+    pixel whose input is 0 starts exactly at rest and stays out of the iteration), and
+    within 6e-4 (contrast) / 6e-7 (Summation) of the stationary level elsewhere at
+    the defaults. Kernels evaluate it in float32 (:func:`cdnf_ti.kernels.common.local_start`).
+
+    Parameters
+    ----------
+    h, gain : float
+        The field's resting bias and ``sum(W)`` (:func:`~cdnf_ti.params.kernel_gains`).
+    x_max : float
+        Largest input fitted (> 0); larger inputs start at ``start(x_max)``.
+
+    Returns
+    -------
+    ndarray of float64, shape (START_COEFS,)
+    """
+    from .params import resting_level, stationary_level
+
+    g0 = resting_level(h, gain)
+    nodes = np.cos(np.pi * (np.arange(64) + 0.5) / 64)  # Chebyshev nodes in t, none at x = 0
+    x = 0.5 * (nodes + 1.0) * x_max
+    q = (stationary_level(x, h, gain) - g0) / x
+    cheb = np.polynomial.chebyshev.chebfit(nodes, q, 3)
+    mono = np.polynomial.chebyshev.cheb2poly(cheb)
+    return np.array([g0, x_max, 2.0 / x_max, *mono], dtype=np.float64)
+
+
+def local_start(x: np.ndarray, coefs: np.ndarray) -> np.ndarray:
+    """Evaluate a local start (:func:`local_start_coefficients`) at the inputs ``x`` (float64, any shape)."""
+    g0, x_max, k, q0, q1, q2, q3 = (float(c) for c in coefs)
+    xc = np.clip(x, 0.0, x_max)
+    t = xc * k - 1.0
+    return g0 + xc * (q0 + t * (q1 + t * (q2 + t * q3)))
+
+
+def cdnf_local_starts(params) -> np.ndarray:
+    """The local starts of C-DNF's fields: row 0 the contrast fields (input ``P_on``/``P_off``
+    in ``[0, 1]``), row 1 the Summation field (input ``S`` up to ``(alpha_on + alpha_off)
+    theta(2 - h)``, the largest a contrast field can reach with grey levels in ``[0, 1]``).
+
+    Parameters
+    ----------
+    params : CDNFParams
+
+    Returns
+    -------
+    ndarray of float64, shape (2, START_COEFS)
+    """
+    from .params import THETA_SCALE, kernel_gains
+
+    gain_c, gain_s = kernel_gains(params)
+    s_max = (params.alpha_on + params.alpha_off) * THETA_SCALE * math.tanh(max(2.0 - params.h, 1e-3))
+    return np.stack([local_start_coefficients(params.h, gain_c, 1.0),
+                     local_start_coefficients(params.h, gain_s, s_max if s_max > 1e-6 else 1.0)])

@@ -43,6 +43,7 @@ from .common import (  # noqa: F401 - fill, lanes_fill, LANES, MAX_STEPS, MAX_WO
     lane_shift,
     lanes_fill,
     launch_gate,
+    local_start,
     luminance_change,
     record_residuals,
     reset_sync,
@@ -50,6 +51,7 @@ from .common import (  # noqa: F401 - fill, lanes_fill, LANES, MAX_STEPS, MAX_WO
     run_load,
     run_max,
     run_store,
+    start_coefficients,
     sync_size,
     tanh_rational,
     wait_phase,
@@ -63,6 +65,9 @@ F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
 D1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
 #: A launch record (:class:`~cdnf_ti.kernels.common.LaunchRecord`): (lam, mom) in, residuals out.
 RECORD = ti.types.ndarray(dtype=ti.f32, ndim=2)
+#: The local starts of the contrast (row 0) and Summation (row 1) fields, float32 (2, 7)
+#: (:func:`cdnf_ti.solver.cdnf_local_starts`); a kernel given ``local = 0`` leaves the fields as they are.
+START = ti.types.ndarray(dtype=ti.f32, ndim=2)
 
 
 
@@ -81,19 +86,25 @@ def field_update(inp, lateral, u, prev, h, lam, mom):
 
 @ti.func
 def _load_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
-    frame, L, P = ti.static(ctx[0], ctx[1], ctx[2])
-    luminance_change(frame, L, P, i, j, n, ctx[3], ctx[4], False)
+    frame, L, P, u_on, u_off = ti.static(ctx[0], ctx[1], ctx[2], ctx[3], ctx[4])
+    p = luminance_change(frame, L, P, i, j, n, ctx[5], ctx[6], False)
+    if ctx[7] != 0:
+        run_store(u_on, i, j, local_start(ti.max(p, 0.0), ctx[8]), n)
+        run_store(u_off, i, j, local_start(ti.max(-p, 0.0), ctx[8]), n)
     return 0.0
 
 
 @ti.kernel
-def load_frame(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, scale: ti.f32, first: ti.i32, blocks: ti.i32):
-    """``g = frame * scale``; ``P = g - L`` (0 when ``first``); ``L = g``."""
+def load_frame(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, scale: ti.f32, first: ti.i32, blocks: ti.i32,
+               u_on: F2, u_off: F2, start: START, local: ti.i32):
+    """``g = frame * scale``; ``P = g - L`` (0 when ``first``); ``L = g``; with ``local``,
+    ``u_on = start(P_on)`` and ``u_off = start(P_off)`` (:func:`local_start`, row 0 of ``start``)."""
     H, W = L.shape[0], L.shape[1]
     keep = ti.select(first != 0, 0.0, 1.0)
     for k in range(H * blocks):
+        cs = start_coefficients(start, 0)
         i, j0, j1 = block_span(k, W, blocks)
-        row_runs(_load_run, (frame, L, P, scale, keep), i, j0, j1, H, W, "sum", 1)
+        row_runs(_load_run, (frame, L, P, u_on, u_off, scale, keep, local, cs), i, j0, j1, H, W, "sum", 1)
 
 
 @ti.kernel
@@ -172,12 +183,17 @@ def contrast_solve(
 
 
 @ti.kernel
-def summation_input(u_on: F2, u_off: F2, S: F2, alpha_on: ti.f32, alpha_off: ti.f32, theta_scale: ti.f32):
-    """``S = alpha_on theta([u_on]+) + alpha_off theta([u_off]+)``."""
+def summation_input(u_on: F2, u_off: F2, S: F2, alpha_on: ti.f32, alpha_off: ti.f32, theta_scale: ti.f32,
+                    v: F2, start: START, local: ti.i32):
+    """``S = alpha_on theta([u_on]+) + alpha_off theta([u_off]+)``; with ``local``,
+    ``v = start(S)`` (:func:`local_start`, row 1 of ``start``)."""
     for i, j in S:
         a_on = tanh_rational(ti.max(u_on[i, j], 0.0)) * theta_scale
         a_off = tanh_rational(ti.max(u_off[i, j], 0.0)) * theta_scale
-        S[i, j] = alpha_on * a_on + alpha_off * a_off
+        s = alpha_on * a_on + alpha_off * a_off
+        S[i, j] = s
+        if local != 0:
+            v[i, j] = local_start(s, start_coefficients(start, 1))
 
 
 @ti.func
@@ -282,13 +298,34 @@ def lanes_pending_all(pend: ti.template(), W: ti.template()):
 # -- frame, Summation input, mean activation -------------------------------------------
 
 @ti.func
-def _load_row(frame: ti.template(), L: ti.template(), P: ti.template(), scale, first, W: ti.template(),
-              pend: ti.template(), pp, i):
-    """Row ``i``: ``g = frame * scale``; ``P = g - L`` (0 when ``first``); ``L = g`` (frame columns only).
+def _start_element(x: ti.template(), p, i, e, inp, cs, W: ti.template()):
+    """Element ``(i, e)`` of buffer ``p`` of ``x`` = :func:`local_start` of the input ``inp`` (a lane
+    vector, >= 0) on the frame columns; returns whether any value changed.
 
-    Elements where ``P`` changed join the row's pending span of parity ``pp`` (contrast group).
+    An element without input (common: static background, and where a field is off) starts at
+    the resting level ``cs[0]`` without evaluating the fit.
+    """
+    new = ti.Vector([cs[0]] * LANES, dt=ti.f32)
+    if (inp > 0.0).any():
+        new = local_start(inp, cs)
+    old = x[p, i, e]
+    new = ti.select(lane_mask(e, W) > 0.0, new, old)
+    x[p, i, e] = new
+    return (new != old).any()
+
+
+@ti.func
+def _load_row(frame: ti.template(), L: ti.template(), P: ti.template(), scale, first, W: ti.template(),
+              pend: ti.template(), pp, i, u_on: ti.template(), u_off: ti.template(), start: ti.template(), local,
+              mode: ti.template()):
+    """Row ``i``: ``g = frame * scale``; ``P = g - L`` (0 when ``first``); ``L = g`` (frame columns only);
+    with ``local``, buffer ``pp`` of ``u_on``/``u_off`` = :func:`local_start` of ``P_on``/``P_off``.
+
+    Elements where ``P`` or a field changed join the row's pending span of parity ``pp``
+    (contrast group).
     """
     E1 = (LANES + W - 1) // LANES
+    cs = start_coefficients(start, 0)
     lo = EMPTY_LO
     hi = EMPTY_HI
     for e in range(1, E1 + 1):
@@ -298,21 +335,28 @@ def _load_row(frame: ti.template(), L: ti.template(), P: ti.template(), scale, f
             g[l] = ti.cast(frame[i, c], ti.f32) * scale
         p_new = ti.select(first != 0, 0.0, g - L[i, e])
         moved = (p_new != P[i, e]).any()
+        if local != 0:
+            moved |= _start_element(u_on, pp, i, e, ti.max(p_new, 0.0), cs, W)
+            moved |= _start_element(u_off, pp, i, e, ti.max(-p_new, 0.0), cs, W)
         lo = ti.select(moved, ti.min(lo, e), lo)
         hi = ti.select(moved, e, hi)
         P[i, e] = p_new
         L[i, e] = g
     if lo <= hi:
         pend[pp, i] = ti.Vector([ti.min(pend[pp, i][0], lo), ti.max(pend[pp, i][1], hi)])
+        if local != 0:
+            fill_ghosts(u_on, pp, i, 1, 1, W, 1, mode)
+            fill_ghosts(u_off, pp, i, 1, 1, W, 1, mode)
 
 
 @ti.kernel
 def lanes_load_frame(frame: ti.types.ndarray(ndim=2), L: ti.template(), P: ti.template(), scale: ti.f32,
-                     first: ti.i32, W: ti.template(), pend: ti.template(), pp: ti.i32):
+                     first: ti.i32, W: ti.template(), pend: ti.template(), pp: ti.i32, u_on: ti.template(),
+                     u_off: ti.template(), start: START, local: ti.i32, mode: ti.template()):
     """:func:`_load_row` for every row. The contrast solve loads a frame itself (its first
     phase); this kernel serves a frame whose fields are needed before that."""
     for i in range(L.shape[0]):
-        _load_row(frame, L, P, scale, first, W, pend, pp, i)
+        _load_row(frame, L, P, scale, first, W, pend, pp, i, u_on, u_off, start, local, mode)
 
 
 @ti.kernel
@@ -324,13 +368,17 @@ def lanes_refresh_ghosts(x: ti.template(), W: ti.template(), mode: ti.template()
 
 @ti.func
 def _summation_input_row(u_on: ti.template(), u_off: ti.template(), c, S: ti.template(), pend: ti.template(), i,
-                         alpha_on, alpha_off, theta_scale, W: ti.template()):
-    """Row ``i`` of ``S = alpha_on theta([u_on]+) + alpha_off theta([u_off]+)`` (buffers ``c``).
+                         alpha_on, alpha_off, theta_scale, W: ti.template(), v: ti.template(), s,
+                         start: ti.template(), local, mode: ti.template(), R: ti.template()):
+    """Row ``i`` of ``S = alpha_on theta([u_on]+) + alpha_off theta([u_off]+)`` (buffers ``c``);
+    with ``local``, buffer ``s`` of ``v`` = :func:`local_start` of ``S`` (``R``: the DoG radius,
+    the ghost columns to refresh).
 
-    Elements where S changed join the row's pending span in both parities of the
+    Elements where S or v changed join the row's pending span in both parities of the
     Summation group (the next update overwrites the other parity anyway).
     """
     E1 = (LANES + W - 1) // LANES
+    cs = start_coefficients(start, 1)
     lo = EMPTY_LO
     hi = EMPTY_HI
     for e in range(1, E1 + 1):
@@ -338,25 +386,32 @@ def _summation_input_row(u_on: ti.template(), u_off: ti.template(), c, S: ti.tem
         a_off = tanh_rational(ti.max(u_off[c, i, e], 0.0)) * theta_scale
         s_new = alpha_on * a_on + alpha_off * a_off
         moved = (s_new != S[i, e]).any()
+        if local != 0:
+            moved |= _start_element(v, s, i, e, s_new, cs, W)
         lo = ti.select(moved, ti.min(lo, e), lo)
         hi = ti.select(moved, e, hi)
         S[i, e] = s_new
     if lo <= hi:
         for q in ti.static(range(2)):
             pend[q, i] = ti.Vector([ti.min(pend[q, i][0], lo), ti.max(pend[q, i][1], hi)])
+        if local != 0:
+            fill_ghosts(v, s, i, 1, 1, W, R, mode)
 
 
 @ti.kernel
 def lanes_summation_input(u_on: ti.template(), u_off: ti.template(), c: ti.i32, S: ti.template(),
                           alpha_on: ti.f32, alpha_off: ti.f32, theta_scale: ti.f32, W: ti.template(),
-                          pend: ti.template()):
-    """``S = alpha_on theta([u_on]+) + alpha_off theta([u_off]+)`` (see :func:`_summation_input_row`).
+                          pend: ti.template(), v: ti.template(), s: ti.i32, start: START, local: ti.i32,
+                          mode: ti.template(), R: ti.template()):
+    """``S = alpha_on theta([u_on]+) + alpha_off theta([u_off]+)`` and the Summation field's local
+    start (see :func:`_summation_input_row`).
 
     The contrast solve computes S itself when it converges; this kernel serves the
     other cases (a solve that ended unconverged, a state restored from NumPy).
     """
     for i in range(S.shape[0]):
-        _summation_input_row(u_on, u_off, c, S, pend, i, alpha_on, alpha_off, theta_scale, W)
+        _summation_input_row(u_on, u_off, c, S, pend, i, alpha_on, alpha_off, theta_scale, W, v, s, start, local,
+                             mode, R)
 
 
 @ti.func
@@ -436,6 +491,7 @@ def lanes_contrast_solve(
     tau: ti.f32, tol: ti.f32, grow: ti.f32, nw: ti.i32, sync: ti.template(), rbuf: ti.template(),
     W: ti.template(), mode: ti.template(),
     S: ti.template(), pend_s: ti.template(), alpha_on: ti.f32, alpha_off: ti.f32, theta_scale: ti.f32,
+    v: ti.template(), s: ti.i32, start: START, local: ti.i32, R: ti.template(),
 ):
     """Up to ``n`` ON/OFF updates (:func:`field_update`) in one launch, by persistent workers.
 
@@ -445,9 +501,10 @@ def lanes_contrast_solve(
     best of the launch. The residuals ``max|F(u) - u|`` of each update (ON, OFF; -1 for
     updates not run) go to ``record[j, 2:4]`` (:class:`~cdnf_ti.kernels.common.LaunchRecord`). Only the
     elements near a pending span (``pend``, same parity as the buffers) are visited.
-    With ``load`` set, the workers first load ``frame`` (:func:`_load_row`). When the
-    launch converges, they go on to compute the Summation input ``S`` of the result
-    (:func:`_summation_input_row`; pending spans ``pend_s``).
+    With ``load`` set, the workers first load ``frame`` (:func:`_load_row`; with ``local``
+    it also sets the contrast fields' local start). When the launch converges, they go on
+    to compute the Summation input ``S`` of the result and, with ``local``, the local start
+    of buffer ``s`` of ``v`` (:func:`_summation_input_row`; pending spans ``pend_s``).
     """
     H = P.shape[0]
     E1 = (LANES + W - 1) // LANES
@@ -462,7 +519,7 @@ def lanes_contrast_solve(
                     if i0 >= i1:
                         break
                     for i in range(i0, i1):
-                        _load_row(frame, L, P, scale, first, W, pend, c, i)
+                        _load_row(frame, L, P, scale, first, W, pend, c, i, u_on, u_off, start, local, mode)
                     finish_rows(sync, LOAD_PHASE, i1 - i0)
                 wait_phase(sync, LOAD_PHASE, H)
             for j in range(n):
@@ -509,7 +566,8 @@ def lanes_contrast_solve(
                     if i0 >= i1:
                         break
                     for i in range(i0, i1):
-                        _summation_input_row(u_on, u_off, f, S, pend_s, i, alpha_on, alpha_off, theta_scale, W)
+                        _summation_input_row(u_on, u_off, f, S, pend_s, i, alpha_on, alpha_off, theta_scale, W,
+                                             v, s, start, local, mode, R)
     record_residuals(rbuf, record, 2)
 
 

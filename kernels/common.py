@@ -57,6 +57,24 @@ def tanh_rational(x):
 
 
 @ti.func
+def start_coefficients(start: ti.template(), r):
+    """Row ``r`` of a local-start array (float32 ndarray, shape (2, 7), from
+    :func:`cdnf_ti.solver.cdnf_local_starts`) as a vector, read once per row of work."""
+    return ti.Vector([start[r, 0], start[r, 1], start[r, 2], start[r, 3], start[r, 4], start[r, 5],
+                      start[r, 6]], dt=ti.f32)
+
+
+@ti.func
+def local_start(x, c):
+    """The stationary level of a uniform input ``x`` (scalar or lane vector), as fitted by
+    :func:`cdnf_ti.solver.local_start_coefficients` (``c``: :func:`start_coefficients`):
+    ``g0 + x q(t)``, ``x`` clipped to ``[0, x_max]``, ``t = 2 x / x_max - 1``, ``q`` cubic."""
+    xc = ti.min(ti.max(x, 0.0), c[1])
+    t = xc * c[2] - 1.0
+    return c[0] + xc * (c[3] + t * (c[4] + t * (c[5] + t * c[6])))
+
+
+@ti.func
 def border_index(i, n, mode: ti.template()):
     """Map a possibly out-of-range index into [0, n) for the border mode."""
     r = i

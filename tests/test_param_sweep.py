@@ -3,6 +3,7 @@ processes and a Dask LocalCluster, resume, and the reports."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import subprocess
 import sys
@@ -37,9 +38,17 @@ def test_a_range_gives_n_evenly_spaced_values_both_ends_included():
     assert parse_param("h=0.1:0.3:5", CDNFParams).values == (0.1, 0.15, 0.2, 0.25, 0.3)
 
 
+@dataclasses.dataclass(frozen=True)
+class _Flagged:
+    """A parameter set with a bool (no model has one today)."""
+
+    flag: bool = True
+
+
 def test_a_list_is_typed_like_the_parameter():
     assert parse_param("max_iter=50,100", CDNFParams).values == (50, 100)
-    assert parse_param("warm_start=true,false", CDNFParams).values == (True, False)
+    assert parse_param("flag=true,off", _Flagged).values == (True, False)
+    assert parse_param("start=local,rest", CDNFParams).values == ("local", "rest")
     assert parse_param("border=reflect,zero", CDNFParams).values == ("reflect", "zero")
 
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..params import THETA_SCALE, CDNFParams, contrast_kernel, dog_profiles, resting_levels, sigmoid
 from ..reference import NumpyCDNFBackend
-from ..solver import RESTART_GROWTH, SolveReport, solve_fixed_point
+from ..solver import RESTART_GROWTH, SolveReport, cdnf_local_starts, solve_fixed_point
 from .base import Model, ModelBackend, SharedWorkspace, StepResult, Trace
 from .registry import register_model
 
@@ -50,6 +50,7 @@ class TaichiCDNFBackend:
         self._records = {"c": LaunchRecord(2), "s": LaunchRecord(1)}  # contrast, Summation launches
         self.steps = self.launch_steps(arch)  # updates per launch, per group (tests may change them)
         self._total = np.zeros(1)  # the mean activation's float64 sum
+        self._start, self.local = _local_start_args(params)
 
         def nd() -> "ti.Ndarray":
             return ti.ndarray(ti.f32, self.shape)
@@ -100,7 +101,8 @@ class TaichiCDNFBackend:
 
     def load(self, grey: np.ndarray, first: bool) -> None:
         scale = 1.0 / 255.0 if grey.dtype == np.uint8 else 1.0
-        self.K.load_frame(grey, self.L, self.P, scale, int(first), self.blocks)
+        self.K.load_frame(grey, self.L, self.P, scale, int(first), self.blocks, self.u_on[self.c],
+                          self.u_off[self.c], self._start, self.local)
 
     def clear_input(self) -> None:
         self.K.fill(self.P, 0.0)
@@ -138,7 +140,7 @@ class TaichiCDNFBackend:
     def summation_input(self) -> None:
         p = self.params
         self.K.summation_input(self.u_on[self.c], self.u_off[self.c], self.S,
-                               p.alpha_on, p.alpha_off, THETA_SCALE)
+                               p.alpha_on, p.alpha_off, THETA_SCALE, self.v[self.s], self._start, self.local)
 
     def summation_iterate(self, lam: float, mom: float = 0.0) -> tuple[float]:
         return self.summation_iterate_many([(lam, mom)])[0]
@@ -171,6 +173,13 @@ class TaichiCDNFBackend:
             "v": self.v[self.s].to_numpy(),
             "P": self.P.to_numpy(),
         }
+
+
+def _local_start_args(params: CDNFParams) -> tuple[np.ndarray, int]:
+    """The kernels' local-start arguments: the coefficients (float32, (2, 7)) and the switch
+    (1 when ``params.start == "local"``; the kernels then set the fields' start as they load
+    a frame and compute a Summation input)."""
+    return cdnf_local_starts(params).astype(np.float32), int(params.start == "local")
 
 
 class _LaneWorkspace(SharedWorkspace):
@@ -267,6 +276,7 @@ class LaneTaichiCDNFBackend:
         g1, g2 = dog_profiles(params)
         self._taps = (tuple(float(x) for x in g1.astype(np.float32)), tuple(float(x) for x in g2.astype(np.float32)))
         self._tol32 = float(np.float32(params.tol))
+        self._start, self.local = _local_start_args(params)
         self.u0, self.v0 = resting_levels(params)
         self.c = 0
         self.s = 0
@@ -359,7 +369,8 @@ class LaneTaichiCDNFBackend:
             grey, scale, first = self._frame_in
             self._frame_in = None
             ws = self.ws
-            self.K.lanes_load_frame(grey, ws.L, ws.P, scale, first, self.W, ws.pend["c"], self.c)
+            self.K.lanes_load_frame(grey, ws.L, ws.P, scale, first, self.W, ws.pend["c"], self.c, ws.u_on, ws.u_off,
+                                    self._start, self.local, self.mode)
 
     def clear_input(self) -> None:
         ws = self._acquire()
@@ -380,10 +391,14 @@ class LaneTaichiCDNFBackend:
         The contrast launch is compiled for the frame type of :meth:`expect_frames` (default
         float32) only: each variant costs about a second of start-up even with a warm cache.
         """
-        self.contrast_iterate_many([(0.0, 0.0)])
-        self._s_ready = False
-        self.summation_input()  # the stand-alone kernel too
-        self.summation_iterate_many([(0.0, 0.0)])
+        local, self.local = self.local, 0  # no local start either (compiled all the same)
+        try:
+            self.contrast_iterate_many([(0.0, 0.0)])
+            self._s_ready = False
+            self.summation_input()  # the stand-alone kernel too
+            self.summation_iterate_many([(0.0, 0.0)])
+        finally:
+            self.local = local
         self._mean = None
         self.mean_activation()
         self._acquire().all_active()
@@ -409,7 +424,8 @@ class LaneTaichiCDNFBackend:
         self.K.lanes_contrast_solve(
             frame, load, ws.L, scale, first, ws.P, ws.u_on, ws.u_off, ws.pend["c"], c, *self.k, p.h,
             rec.start(coefs), len(coefs), self.tau, self._tol32, RESTART_GROWTH, self.nw, ws.sync, ws.rbuf,
-            self.W, self.mode, ws.S, ws.pend["s"], p.alpha_on, p.alpha_off, THETA_SCALE)
+            self.W, self.mode, ws.S, ws.pend["s"], p.alpha_on, p.alpha_off, THETA_SCALE, ws.v, self.s, self._start,
+            self.local, int(p.radius_s))
         res = rec.residuals(len(coefs))
         self.c = (c + len(res)) % 2
         self._s_ready = bool(res) and max(res[-1]) <= self._tol32
@@ -425,7 +441,8 @@ class LaneTaichiCDNFBackend:
             return
         p = self.params
         self.K.lanes_summation_input(ws.u_on, ws.u_off, self.c, ws.S, p.alpha_on, p.alpha_off, THETA_SCALE,
-                                     self.W, ws.pend["s"])
+                                     self.W, ws.pend["s"], ws.v, self.s, self._start, self.local, self.mode,
+                                     int(p.radius_s))
 
     def summation_iterate(self, lam: float, mom: float = 0.0) -> tuple[float]:
         return self.summation_iterate_many([(lam, mom)])[0]
@@ -581,7 +598,7 @@ class CDNF(Model):
             diag = dict(iterations_on=0, iterations_off=0, iterations_sum=0,
                         residual_on=0.0, residual_off=0.0, residual_sum=0.0, damping_sum=1.0, restarts=0)
             return StepResult(t, 0.5, False, True, diag)
-        if not self.params.warm_start:
+        if self.params.start == "rest":
             be.restore_rest()
         rc, rs = self._solve(be)
         i_v = sigmoid(be.mean_activation())
