@@ -33,6 +33,8 @@ from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
+from .params import THETA_SCALE, kernel_gains, resting_level, stationary_level
+
 Coef = tuple[float, float]  # (lam, mom)
 SCHEMES = ("chebyshev", "plain")
 #: Restart the Chebyshev recurrence when the worst residual exceeds this factor times the best seen.
@@ -306,8 +308,6 @@ def local_start_coefficients(h: float, gain: float, x_max: float) -> np.ndarray:
     -------
     ndarray of float64, shape (START_COEFS,)
     """
-    from .params import resting_level, stationary_level
-
     g0 = resting_level(h, gain)
     nodes = np.cos(np.pi * (np.arange(64) + 0.5) / 64)  # Chebyshev nodes in t, none at x = 0
     x = 0.5 * (nodes + 1.0) * x_max
@@ -338,8 +338,6 @@ def cdnf_local_starts(params) -> np.ndarray:
     -------
     ndarray of float64, shape (2, START_COEFS)
     """
-    from .params import THETA_SCALE, kernel_gains
-
     gain_c, gain_s = kernel_gains(params)
     s_max = (params.alpha_on + params.alpha_off) * THETA_SCALE * math.tanh(max(2.0 - params.h, 1e-3))
     return np.stack([local_start_coefficients(params.h, gain_c, 1.0),

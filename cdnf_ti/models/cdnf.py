@@ -50,7 +50,9 @@ class TaichiCDNFBackend:
         self._records = {"c": LaunchRecord(2), "s": LaunchRecord(1)}  # contrast, Summation launches
         self.steps = self.launch_steps(arch)  # updates per launch, per group (tests may change them)
         self._total = np.zeros(1)  # the mean activation's float64 sum
-        self._start, self.local = _local_start_args(params)
+        start, self.local = _local_start_args(params)
+        self._start = ti.ndarray(ti.f32, start.shape)  # on the device once, not copied per launch
+        self._start.from_numpy(start)
 
         def nd() -> "ti.Ndarray":
             return ti.ndarray(ti.f32, self.shape)
