@@ -211,6 +211,7 @@ class NumpyFLGMDBackend(_NumpyLGMDBase):
         self.k = kernel_3x3(0.0, *p.k_lateral)
         self.a = kernel_3x3(0.0, *[dt / (dt + t) for t in p.tau_lateral])
         self.g_e = p.excitation_kernel()
+        self.start_gains = p.local_start_gains(dt)
         super().__init__(shape)
 
     def reset(self) -> None:
@@ -219,12 +220,22 @@ class NumpyFLGMDBackend(_NumpyLGMDBase):
         self.ON0, self.OFF0, self.S_on, self.S_off, self.S, self.G = z(), z(), z(), z(), z(), z()
 
     def prepare(self) -> None:
-        """Feed-forward drives ``ON0``/``OFF0``; the fixed-point iterate starts there."""
+        """Feed-forward drives ``ON0``/``OFF0`` and the fixed-point iterate's start.
+
+        The start is ``X0 + kappa [w X0 - Q]+`` with ``Q = w_i sum K (1 - a) X(t-1)``
+        (:meth:`~cdnf_ti.models.flgmd.FLGMDParams.local_start_gains`; the drive itself
+        when ``kappa = 0``).
+        """
         p = self.params
         self.ON_prev, self.OFF_prev = self.ON, self.OFF
         self.ON0 = half_wave_on(self.P, self.ON_prev, p.clip, p.dc)
         self.OFF0 = half_wave_off(self.P, self.OFF_prev, p.clip, p.dc)
-        self.ON, self.OFF = self.ON0.copy(), self.OFF0.copy()
+        starts = []
+        for x0, x_prev, w_i, (w, kappa) in zip((self.ON0, self.OFF0), (self.ON_prev, self.OFF_prev),
+                                               (p.w_i_on, p.w_i_off), self.start_gains):
+            q = w_i * correlate3(x_prev, self.k * (1.0 - self.a))
+            starts.append(x0 + kappa * np.maximum(w * x0 - q, 0.0))
+        self.ON, self.OFF = starts
         self._before = (self.ON, self.OFF)  # the iterate before the current one (Chebyshev momentum)
 
     def _local(self, x: np.ndarray, x_prev: np.ndarray, w_i: float) -> np.ndarray:

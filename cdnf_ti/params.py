@@ -286,18 +286,9 @@ def resting_level(h: float, gain: float) -> float:
     """Uniform stationary value ``u*`` of ``u = -h + vartheta(gain * u)``.
 
     For a uniform field with a replicate border the lateral input is
-    ``gain * u`` with ``gain = sum(W)``. Solved by Newton's method in float64.
+    ``gain * u`` with ``gain = sum(W)``: :func:`stationary_level` at zero input.
     """
-    u = -h
-    for _ in range(100):
-        t = math.tanh(0.5 * gain * u)
-        f = -h + t - u
-        df = 0.5 * gain * (1.0 - t * t) - 1.0
-        step = f / df
-        u -= step
-        if abs(step) < 1e-15:
-            break
-    return u
+    return float(stationary_level(0.0, h, gain))
 
 
 def stationary_level(x: np.ndarray | float, h: float, gain: float) -> np.ndarray:

@@ -45,6 +45,10 @@ COMPILERS = ("taichi", "quadrants")
 COMPILER_ENV = "CDNF_TI_COMPILER"
 #: Environment variable naming the compile-cache folder (optional).
 CACHE_ENV = "CDNF_TI_CACHE_DIR"
+#: Size of the compile cache before the compiler evicts its least recently used kernels (bytes).
+#: Both compilers default to 100 MiB, which the kernels of the five models at a few frame sizes
+#: outgrow: each later run then evicted and recompiled kernels it needed (minutes per run).
+CACHE_MAX_BYTES = 1 << 30  # 1 GiB (the setting is a 32-bit int)
 #: Environment variable overriding the fast path's lanes per vector (optional; ``kernels.common.lane_count``).
 LANES_ENV = "CDNF_TI_LANES"
 #: The lane counts ``$CDNF_TI_LANES`` may choose (to tune the lane layout on another CPU).
@@ -270,7 +274,8 @@ def ensure_taichi(arch: str = "cpu", compiler: str | None = None) -> str:
     with _lock:
         t0 = time.perf_counter()
         ti = importlib.import_module(name)
-        kw = dict(default_fp=ti.f32, default_ip=ti.i32, offline_cache=True, log_level=ti.ERROR)
+        kw = dict(default_fp=ti.f32, default_ip=ti.i32, offline_cache=True, log_level=ti.ERROR,
+                  offline_cache_max_size_of_files=CACHE_MAX_BYTES)
         if os.environ.get(CACHE_ENV):  # compile cache folder (default: the compiler's, in ~/.cache)
             kw["offline_cache_file_path"] = os.environ[CACHE_ENV]
         # both print "[Taichi|Quadrants] Starting on arch=..."

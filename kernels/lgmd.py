@@ -299,6 +299,14 @@ def feedback_update(x0, x, local, before, beta, lam, mom):
 
 
 @ti.func
+def feedback_start(x0, q, w, kappa):
+    """The iterate's start ``X0 + kappa [w X0 - Q]+``: the fixed point of a pixel whose neighbours
+    share its drive ``X0`` (``w = sum W_x``, ``kappa = beta / (1 - beta w)``, or 0 to start at the
+    drive; :meth:`cdnf_ti.models.flgmd.FLGMDParams.local_start_gains`)."""
+    return x0 + kappa * ti.max(w * x0 - q, 0.0)
+
+
+@ti.func
 def summed_layer(s_on, s_off, t_s):
     """``S = S_on + S_off`` kept where ``>= t_s``."""
     s = s_on + s_off
@@ -317,26 +325,31 @@ def _prepare_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
     on0, off0, on, off, on_p, off_p, q_on, q_off = ti.static(ctx[0], ctx[1], ctx[2], ctx[3], ctx[4], ctx[5],
                                                              ctx[6], ctx[7])
     c_on, c_off = ctx[8], ctx[9]  # (edge, diagonal) weights w_i K (1 - a) of each channel
-    run_store(q_on, i, j, _stencil(on_p, im, i, ip, jm, j, jp, n, 0.0, c_on[0], c_on[1]), n)
-    run_store(q_off, i, j, _stencil(off_p, im, i, ip, jm, j, jp, n, 0.0, c_off[0], c_off[1]), n)
-    run_store(on, i, j, run_load(on0, i, j, n), n)
-    run_store(off, i, j, run_load(off0, i, j, n), n)
+    g_on, g_off = ctx[10], ctx[11]  # (w, kappa) of each channel's start
+    qn = _stencil(on_p, im, i, ip, jm, j, jp, n, 0.0, c_on[0], c_on[1])
+    qf = _stencil(off_p, im, i, ip, jm, j, jp, n, 0.0, c_off[0], c_off[1])
+    run_store(q_on, i, j, qn, n)
+    run_store(q_off, i, j, qf, n)
+    run_store(on, i, j, feedback_start(run_load(on0, i, j, n), qn, g_on[0], g_on[1]), n)
+    run_store(off, i, j, feedback_start(run_load(off0, i, j, n), qf, g_off[0], g_off[1]), n)
     return 0.0
 
 
 @ti.kernel
 def flgmd_prepare(on0: F2, off0: F2, on: F2, off: F2, on_p: F2, off_p: F2, q_on: F2, q_off: F2,
                   k1: ti.f32, k2: ti.f32, a1: ti.f32, a2: ti.f32, w_i_on: ti.f32, w_i_off: ti.f32,
-                  blocks: ti.i32):
+                  wn: ti.f32, kn: ti.f32, wf: ti.f32, kf: ti.f32, blocks: ti.i32):
     """The frame's constant inhibition ``Q = w_i sum K (1 - a) X(t-1)`` of both channels
-    (``on_p``/``off_p``: the settled previous channels); the iterate ``on``/``off``
-    starts at the drives ``on0``/``off0`` (:func:`load_frame`)."""
+    (``on_p``/``off_p``: the settled previous channels) and the iterate's start ``on``/``off``
+    from the drives ``on0``/``off0`` (:func:`load_frame`) by :func:`feedback_start`
+    (``wn``/``kn``, ``wf``/``kf``: ``w`` and ``kappa`` of ON and OFF)."""
     H, W = on0.shape[0], on0.shape[1]
     c = ti.Vector([k1 * (1.0 - a1), k2 * (1.0 - a2)])
+    g_on, g_off = ti.Vector([wn, kn]), ti.Vector([wf, kf])
     for k in range(H * blocks):
         i, j0, j1 = block_span(k, W, blocks)
-        row_runs(_prepare_run, (on0, off0, on, off, on_p, off_p, q_on, q_off, w_i_on * c, w_i_off * c),
-                 i, j0, j1, H, W, "sum", 1)
+        row_runs(_prepare_run, (on0, off0, on, off, on_p, off_p, q_on, q_off, w_i_on * c, w_i_off * c,
+                                g_on, g_off), i, j0, j1, H, W, "sum", 1)
 
 
 @ti.func
@@ -448,17 +461,17 @@ def lgmd_lanes_load(
     c_on: ti.i32, s_on: ti.i32, c_off: ti.i32, s_off: ti.i32, scale: ti.f32, first: ti.i32, clip: ti.f32,
     dc: ti.f32, W: ti.template(), blocks: ti.i32, feedback: ti.template(), on0: ti.template(),
     off0: ti.template(), q_on: ti.template(), q_off: ti.template(), qn1: ti.f32, qn2: ti.f32, qf1: ti.f32,
-    qf2: ti.f32, out: D1,
+    qf2: ti.f32, wn: ti.f32, kn: ti.f32, wf: ti.f32, kf: ti.f32, out: D1,
 ):
     """:func:`load_frame` on lane fields: photoreceptors ``L``/``P`` and the ON/OFF channels,
     ``on[s_on] = P [P >= clip] + dc on[c_on]`` (same for OFF); adds ``sum |P|`` to ``out[0]``
     (set to 0 by the caller).
 
     With ``feedback`` (F-LGMD) it also does :func:`flgmd_prepare`: the drives
-    ``on0``/``off0`` (= the iterate's start ``on[s_on]``/``off[s_off]``) and
-    ``Q = w_i sum K (1 - a) X(t-1)`` of the settled channels ``on[c_on]``/``off[c_off]``
-    (``qn``/``qf``: edge and diagonal weights of ON and OFF); otherwise those
-    arguments are not used.
+    ``on0``/``off0``, ``Q = w_i sum K (1 - a) X(t-1)`` of the settled channels
+    ``on[c_on]``/``off[c_off]`` (``qn``/``qf``: edge and diagonal weights of ON and OFF)
+    and the iterate's start ``on[s_on]``/``off[s_off]`` (:func:`feedback_start`, ``wn``/``kn``,
+    ``wf``/``kf``: ``w`` and ``kappa`` of ON and OFF); otherwise those arguments are not used.
     """
     H = L.shape[0]
     E1 = ti.static((LANES + W - 1) // LANES)
@@ -474,15 +487,19 @@ def lgmd_lanes_load(
             L[i, e] = g
             P[i, e] = p
             a, b = half_wave(p, on[c_on, i, e], off[c_off, i, e], clip, dc)
-            on[s_on, i, e] = a
-            off[s_off, i, e] = b
             if ti.static(feedback):
                 on0[i, e] = a
                 off0[i, e] = b
                 cn, en, dn = lane_edge_diag(on, c_on, im, i, ip, e)
-                q_on[i, e] = _symmetric(cn, en, dn, 0.0, qn1, qn2)
+                qn = _symmetric(cn, en, dn, 0.0, qn1, qn2)
+                q_on[i, e] = qn
                 cf, ef, df = lane_edge_diag(off, c_off, im, i, ip, e)
-                q_off[i, e] = _symmetric(cf, ef, df, 0.0, qf1, qf2)
+                qf = _symmetric(cf, ef, df, 0.0, qf1, qf2)
+                q_off[i, e] = qf
+                a = feedback_start(a, qn, wn, kn)
+                b = feedback_start(b, qf, wf, kf)
+            on[s_on, i, e] = a
+            off[s_off, i, e] = b
             acc += ti.cast((ti.abs(p) * lane_mask(e, W)).sum(), ti.f64)
         fill_ghosts(on, s_on, i, e0 == 1, e1 == E1 + 1, W, 1, REPLICATE)
         fill_ghosts(off, s_off, i, e0 == 1, e1 == E1 + 1, W, 1, REPLICATE)

@@ -125,6 +125,15 @@ def test_limit_cpu_threads_sizes_the_pool_under_each_compiler(compiler):
     assert proc.stdout.split()[-1] == "3"
 
 
+def test_the_compile_cache_keeps_a_gigabyte_of_kernels_before_it_evicts_any():
+    # both compilers default to 100 MiB, less than the kernels of the five models at a few sizes
+    from cdnf_ti.taichi_runtime import CACHE_MAX_BYTES, dsl
+
+    ensure_taichi("cpu")
+    cfg = dsl().lang.impl.current_cfg()
+    assert cfg.offline_cache and cfg.offline_cache_max_size_of_files == CACHE_MAX_BYTES >= 1 << 30
+
+
 @pytest.mark.parametrize("compiler", installed_compilers())
 def test_the_lane_width_of_the_fast_path_suits_the_compiler(compiler):
     # taichi runs the lane kernels fastest with 32 lanes, quadrants with 16 (docs/PERFORMANCE.md, round 7)

@@ -6,6 +6,7 @@ import pytest
 from conftest import small_stimulus
 
 from cdnf_ti.baselines_reference import correlate3, delayed_spread, kernel_3x3
+from cdnf_ti.bench.inputs import standin_video
 from cdnf_ti.models import FLGMDONn, FLGMDParams
 from cdnf_ti.stimuli.basic import BASIC_STIMULI
 
@@ -157,3 +158,64 @@ def test_taichi_matches_numpy_reference_with_the_plain_scheme():
 def test_unknown_scheme_is_refused():
     with pytest.raises(ValueError, match="scheme"):
         FLGMDParams(scheme="anderson")
+
+
+# --- where the feedback iteration starts (FLGMDParams.start) -------------------------------------
+
+
+@pytest.mark.parametrize("beta_on, beta_off", [(-0.5, 0.0), (-0.3, 0.4), (0.5, -0.2)])
+def test_local_start_is_the_fixed_point_of_a_uniform_neighbourhood(beta_on, beta_off):
+    p = FLGMDParams(beta_on=beta_on, beta_off=beta_off)
+    x0 = np.linspace(0.0, 80.0, 41)
+    q = np.array([0.0, 5.0, 30.0])[:, None]  # inhibition from the previous frame
+    for beta, (w, kappa) in zip((beta_on, beta_off), p.local_start_gains(33)):
+        start = x0 + kappa * np.maximum(w * x0 - q, 0.0)
+        # a pixel whose neighbours all hold `start`: W_x (*) X = w X
+        np.testing.assert_allclose(np.maximum(x0 + beta * np.maximum(w * start - q, 0.0), 0.0), start,
+                                   atol=1e-12)
+        assert (start >= 0.0).all()
+
+
+def test_drive_start_has_no_gain():
+    for w, kappa in FLGMDParams(start="drive", beta_off=0.3).local_start_gains(33):
+        assert kappa == 0.0 and w > 0.0
+
+
+def uniform_step(h=40, w=56, levels=(100, 100, 160)):
+    return [np.full((h, w), g, np.uint8) for g in levels]
+
+
+@pytest.mark.parametrize("backend", ["numpy", "taichi"])
+def test_local_start_settles_a_uniform_luminance_step_without_iterating(backend):
+    p = FLGMDParams(t_ffi=1e9)  # no FFI hold: the step is computed
+    local = FLGMDONn(p, backend=backend).run(uniform_step())
+    drive = FLGMDONn(FLGMDParams(t_ffi=1e9, start="drive"), backend=backend).run(uniform_step())
+    assert drive.diagnostics["iterations"][-1] >= 3
+    assert local.diagnostics["iterations"][-1] <= 1
+    np.testing.assert_allclose(local.output, drive.output, atol=1e-6, rtol=0)
+
+
+def test_every_start_reaches_the_same_fixed_point():
+    frames = [f[::2, ::3][:, :70] for f in standin_video(10, seed=2)]  # dashcam-like, 120 x 70
+    local = FLGMDONn(FLGMDParams(t_ffi=1e9), backend="numpy").run(frames)
+    drive = FLGMDONn(FLGMDParams(t_ffi=1e9, start="drive"), backend="numpy").run(frames)
+    assert local.converged.all() and drive.converged.all()
+    assert drive.diagnostics["iterations"][1:].min() >= 3  # the feedback really iterates
+    np.testing.assert_allclose(local.output, drive.output, atol=1e-6, rtol=0)
+    np.testing.assert_array_equal(local.spike, drive.spike)
+
+
+def test_local_start_needs_fewer_updates_on_a_translating_object():
+    frames = list(small_stimulus("dark_translating", 96).frames())
+    local = FLGMDONn(FLGMDParams(t_ffi=1e9), backend="numpy").run(frames)
+    drive = FLGMDONn(FLGMDParams(t_ffi=1e9, start="drive"), backend="numpy").run(frames)
+    exact = FLGMDONn(FLGMDParams(t_ffi=1e9, tol=1e-9, max_iter=400), backend="numpy").run(frames)
+    assert local.diagnostics["iterations"].sum() < 0.9 * drive.diagnostics["iterations"].sum()
+    # both are within tol of the fixed point; here S crosses its threshold T_s near the drive's answer
+    np.testing.assert_allclose(local.output, exact.output, atol=1e-6, rtol=0)
+    np.testing.assert_allclose(drive.output, exact.output, atol=1e-3, rtol=0)
+
+
+def test_unknown_start_is_refused():
+    with pytest.raises(ValueError, match="start"):
+        FLGMDParams(start="previous")

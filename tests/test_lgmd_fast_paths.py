@@ -18,7 +18,7 @@ from test_row_runs import moving_noise
 from cdnf_ti.bench.inputs import real_or_standin, standin_video
 from cdnf_ti.kernels.common import LANES
 from cdnf_ti.models import FLGMDParams, create_model
-from cdnf_ti.models.flgmd import LaneTaichiFLGMDBackend, TaichiFLGMDBackend
+from cdnf_ti.models.flgmd import FEEDBACK_STARTS, LaneTaichiFLGMDBackend, TaichiFLGMDBackend
 from cdnf_ti.models.lgmd2 import LaneTaichiLGMD2Backend, TaichiLGMD2Backend
 
 ALWAYS_ON = FLGMDParams(t_ffi=1e9)  # no FFI hold: the per-pixel layers run on every frame
@@ -128,6 +128,36 @@ def test_fast_and_generic_kernels_give_the_same_trace(model):
     assert isinstance(generic_model._be, GENERIC_BACKEND[model])
     np.testing.assert_allclose(fast.output, generic.output, atol=1e-6, rtol=0)
     np.testing.assert_allclose(fast.diagnostics[STEPS[model]], generic.diagnostics[STEPS[model]], rtol=1e-5)
+
+
+def feedback_iterate_start(model):
+    """The ON/OFF iterate of a Taichi F-LGMD backend after ``load`` and ``prepare``, as (H, W) arrays."""
+    be = model._be
+    if isinstance(be, LaneTaichiFLGMDBackend):
+        ws = be._acquire()
+        return ws.frame(ws.on.to_numpy()[be.iterate[0]]), ws.frame(ws.off.to_numpy()[be.iterate[1]])
+    return be.on[be.c].to_numpy(), be.off[be.c].to_numpy()
+
+
+@pytest.mark.parametrize("start", FEEDBACK_STARTS)
+@pytest.mark.parametrize("fast", [True, False], ids=["lane", "generic"])
+def test_feedback_iteration_starts_where_the_reference_starts(fast, start):
+    frames = [np.ascontiguousarray(f[::2, ::3][:, :70]) for f in standin_video(5, seed=3)]  # dashcam-like
+    p = FLGMDParams(t_ffi=1e9, beta_off=0.3, start=start)  # feedback on both channels
+    model, ref = create_model("flgmd_onn", p), create_model("flgmd_onn", p, backend="numpy")
+    model.fast = fast
+    model.run(frames[:-1])
+    ref.run(frames[:-1])
+    assert isinstance(model._be, LANE_BACKEND["flgmd_onn"] if fast else GENERIC_BACKEND["flgmd_onn"])
+    for m in (model, ref):
+        m._be.load(frames[-1], False)
+        m._be.prepare()
+    on, off = feedback_iterate_start(model)
+    rb = ref._be
+    np.testing.assert_allclose(on, rb.ON, atol=1e-3, rtol=1e-5)
+    np.testing.assert_allclose(off, rb.OFF, atol=1e-3, rtol=1e-5)
+    moved = max(np.abs(rb.ON - rb.ON0).max(), np.abs(rb.OFF - rb.OFF0).max())
+    assert moved > 1.0 if start == "local" else moved == 0.0
 
 
 @pytest.mark.parametrize("model", FAST_MODELS)

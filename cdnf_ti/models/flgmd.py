@@ -37,6 +37,8 @@ The reconstruction, per frame (grey levels 0..255, ``dt = 1000 // fps``):
   ``beta_on = -0.5`` (own choice, negative = ONn), ``beta_off = 0``;
   contraction is guaranteed when
   ``|beta| (sum G_e + w_i sum K) < 1`` (checked: 0.5 x 1.75 = 0.875);
+  the iterate starts at each pixel's local fixed point (``start="local"``, see
+  :meth:`FLGMDParams.local_start_gains`) or at the drive ``X0`` (``start="drive"``);
 * ``S = S_on + S_off`` at the fixed point, kept where ``>= 30``; then as LGMD1.
 """
 from __future__ import annotations
@@ -52,6 +54,9 @@ from ..solver import RESTART_GROWTH, solve_fixed_point
 from .lgmd1 import LGMD1, LGMD1Params, lgmd1_checks
 from .lgmd2 import LaneTaichiLGMDBackend, LGMDLanes, TaichiLGMDBackend, lowpass_coefficient
 from .registry import register_model
+
+#: Where the feedback iteration starts each frame (:attr:`FLGMDParams.start`).
+FEEDBACK_STARTS = ("local", "drive")
 
 
 @dataclass(frozen=True)
@@ -79,6 +84,12 @@ class FLGMDParams(ModelParams):
         fallback), see :func:`cdnf_ti.solver.solve_fixed_point`.
     scheme : {"chebyshev", "plain"}
         Iteration scheme of the feedback solve (same fixed point and stopping rule).
+    start : {"local", "drive"}
+        Where each frame's feedback iteration starts (same fixed point and stopping
+        rule): ``"local"`` (default) at the fixed point a pixel would have if its
+        neighbours shared its drive and its previous value (:meth:`local_start_gains`;
+        on the shared clips 10 % fewer updates than the drive), ``"drive"`` at the
+        feed-forward drive ``X0``.
     """
 
     beta_on: float = -0.5
@@ -106,6 +117,7 @@ class FLGMDParams(ModelParams):
     min_damping: float = 1.0 / 16.0
     stall_patience: int = 4
     scheme: str = "chebyshev"
+    start: str = "local"
 
     def __post_init__(self) -> None:
         check_params("FLGMDParams", lgmd1_checks(self) + [
@@ -122,6 +134,7 @@ class FLGMDParams(ModelParams):
             (int(self.max_iter) == self.max_iter and self.max_iter >= 1, "max_iter must be a positive integer"),
             (0 < self.min_damping <= self.damping <= 1, "need 0 < min_damping <= damping <= 1"),
             (self.scheme in ("chebyshev", "plain"), f"scheme must be 'chebyshev' or 'plain', got {self.scheme!r}"),
+            (self.start in FEEDBACK_STARTS, f"start must be one of {', '.join(FEEDBACK_STARTS)}, got {self.start!r}"),
         ])
 
     def contraction(self, channel: str = "on") -> float:
@@ -143,6 +156,23 @@ class FLGMDParams(ModelParams):
         ge = self.excitation_kernel()
         return (feedback_stencil(ge, self.k_lateral, a, self.w_i_on),
                 feedback_stencil(ge, self.k_lateral, a, self.w_i_off))
+
+    def local_start_gains(self, dt: int) -> tuple[tuple[float, float], tuple[float, float]]:
+        """``(w, kappa)`` of the ON and OFF channels: the iterate starts at ``X0 + kappa [w X0 - Q]+``.
+
+        ``w = sum W_x`` is the gain of the feedback stencil on a uniform channel. A
+        pixel whose 3x3 neighbourhood shares its drive ``X0`` and its previous value
+        (so ``Q`` too) has the fixed point ``X = [X0 + beta [w X - Q]+]+``: ``X = X0``
+        where ``w X0 <= Q``, else ``X = (X0 - beta Q) / (1 - beta w)``, which is
+        ``X0 + kappa (w X0 - Q)`` with ``kappa = beta / (1 - beta w)`` (``1 - beta w > 0``
+        by the contraction bound; the start is ``>= 0``). ``kappa = 0`` (``start="drive"``
+        or no feedback) starts at the drive.
+        """
+        gains = []
+        for beta, (c, e, d) in zip((self.beta_on, self.beta_off), self.feedback_stencils(dt)):
+            w = c + 4.0 * e + 4.0 * d
+            gains.append((w, beta / (1.0 - beta * w) if self.start == "local" else 0.0))
+        return gains[0], gains[1]
 
     def chebyshev_bounds(self, dt: int) -> tuple[float, float]:
         """Interval ``[a, b]`` holding the spectrum of the feedback map's Jacobian.
@@ -205,6 +235,7 @@ class TaichiFLGMDBackend(TaichiLGMDBackend):
         self.q_on, self.q_off = self._nd(), self._nd()
         self.a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
         self.w_on, self.w_off = p.feedback_stencils(dt)
+        self.start_gains = p.local_start_gains(dt)
         self._iterate_out = np.zeros(2)  # flgmd_iterate's residuals of ON, OFF
         self._finish_out = np.zeros(1)  # flgmd_finish's sum G
 
@@ -223,7 +254,7 @@ class TaichiFLGMDBackend(TaichiLGMDBackend):
         p = self.params
         self.K.flgmd_prepare(self.on0, self.off0, self.on[self.c], self.off[self.c], self.on[self.pi],
                              self.off[self.pi], self.q_on, self.q_off, *p.k_lateral, *self.a,
-                             p.w_i_on, p.w_i_off, self.blocks)
+                             p.w_i_on, p.w_i_off, *self.start_gains[0], *self.start_gains[1], self.blocks)
 
     def feedback_iterate(self, lam: float, mom: float = 0.0) -> tuple[float, float]:
         """One update ``X <- X + mom (X - X_prev) + lam (T(X) - X)``; returns the residuals before it."""
@@ -288,6 +319,8 @@ class LaneTaichiFLGMDBackend(LaneTaichiLGMDBackend):
         # edge and diagonal weights of Q = w_i sum K (1 - a) X(t-1), per channel
         self.q_weights = tuple(w * k * (1.0 - x) for w in (p.w_i_on, p.w_i_off) for k, x in zip(p.k_lateral, a))
         self.w_on, self.w_off = p.feedback_stencils(dt)
+        start_on, start_off = p.local_start_gains(dt)
+        self.start_gains = (*start_on, *start_off)  # w, kappa of ON, then of OFF
 
     def _reset_buffers(self) -> None:
         self.settled = [0, 0]  # buffer of the settled ON, OFF channel
@@ -299,7 +332,7 @@ class LaneTaichiFLGMDBackend(LaneTaichiLGMDBackend):
         self.iterate = [(c + 1) % 3 for c in self.settled]
         self._sum_g = None
         return self._load(grey, first, self.settled[0], self.iterate[0], self.settled[1], self.iterate[1],
-                          (ws.on0, ws.off0, ws.q_on, ws.q_off, *self.q_weights))
+                          (ws.on0, ws.off0, ws.q_on, ws.q_off, *self.q_weights, *self.start_gains))
 
     def prepare(self) -> None:
         """Nothing to compute: :meth:`load` wrote ``Q`` and the iterate's start."""

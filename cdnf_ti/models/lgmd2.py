@@ -383,12 +383,12 @@ class LaneTaichiLGMDBackend:
               feedback: tuple = ()) -> float:
         """:func:`cdnf_ti.kernels.lgmd.lgmd_lanes_load`: channels ``s`` from ``c``; returns ``sum |P|``.
 
-        ``feedback``: F-LGMD's ``(on0, off0, q_on, q_off, qn1, qn2, qf1, qf2)``, else empty.
+        ``feedback``: F-LGMD's ``(on0, off0, q_on, q_off, qn1, qn2, qf1, qf2, wn, kn, wf, kf)``, else empty.
         """
         ws = self._acquire()
         p = self.params
         scale = 1.0 if grey.dtype == np.uint8 else 255.0
-        extra = feedback or (ws.P, ws.P, ws.P, ws.P, 0.0, 0.0, 0.0, 0.0)  # not read without feedback
+        extra = feedback or (ws.P, ws.P, ws.P, ws.P) + (0.0,) * 8  # not read without feedback
         out = self._load_out
         out.fill(0.0)
         self.K.lgmd_lanes_load(grey, ws.L, ws.P, ws.on, ws.off, c_on, s_on, c_off, s_off, scale, int(first),
