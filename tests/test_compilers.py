@@ -125,6 +125,25 @@ def test_limit_cpu_threads_sizes_the_pool_under_each_compiler(compiler):
     assert proc.stdout.split()[-1] == "3"
 
 
+def test_a_kernel_compile_error_still_names_the_file_and_line():
+    # taichi's parser notes positions as one line (taichi_runtime._one_line_source_positions)
+    ensure_taichi("cpu")
+    from cdnf_ti.taichi_runtime import dsl
+
+    ti = dsl()
+
+    @ti.kernel
+    def broken(x: ti.f32) -> ti.f32:
+        return x + not_defined_anywhere  # noqa: F821
+
+    source = Path(__file__).read_text().splitlines()
+    line = 1 + next(k for k, text in enumerate(source) if text.strip().startswith("return x + not_defined_anywhere"))
+    with pytest.raises(Exception) as err:
+        broken(1.0)
+    msg = str(err.value)
+    assert "not_defined_anywhere" in msg and f'test_compilers.py", line {line}' in msg
+
+
 def test_the_compile_cache_keeps_a_gigabyte_of_kernels_before_it_evicts_any():
     # both compilers default to 100 MiB, less than the kernels of the five models at a few sizes
     from cdnf_ti.taichi_runtime import CACHE_MAX_BYTES, dsl
