@@ -154,7 +154,8 @@ os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
 os.environ.setdefault("ENABLE_QUADRANTS_HEADER_PRINT", "False")
 import importlib
 ti = importlib.import_module(sys.argv[1])
-ti.init(arch=getattr(ti, sys.argv[2]), log_level=ti.ERROR)
+# no compile cache: at exit a runtime would trim the shared cache to the compiler's default size
+ti.init(arch=getattr(ti, sys.argv[2]), log_level=ti.ERROR, offline_cache=False)
 impl = ti.lang.impl
 core = getattr(impl, "_ti_core", None) or getattr(impl, "_qd_core")
 print("ARCH=" + core.arch_name(impl.current_cfg().arch), flush=True)
