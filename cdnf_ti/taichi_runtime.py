@@ -231,8 +231,8 @@ def _host_runtime(name: str) -> tuple[str, ModuleType] | None:
     return ("cpu" if got in _CPU_NAMES else got), ti
 
 
-def _one_line_source_positions(module: ModuleType) -> bool:
-    """Have taichi 1.7's kernel parser note each source position as one line; True if it did.
+def _one_line_source_positions(module: ModuleType) -> None:
+    """Have taichi 1.7's kernel parser note each source position as one line.
 
     For every statement and expression of every kernel it parses, taichi 1.7 formats the
     source line with a caret hint, wrapped by ``textwrap``, for messages that are almost
@@ -243,18 +243,17 @@ def _one_line_source_positions(module: ModuleType) -> bool:
     depend on it. quadrants formats positions only when needed and is left as it is.
     """
     if module.__name__ != "taichi":
-        return False
+        return
     try:
         context = importlib.import_module("taichi.lang.ast.ast_transformer_utils").ASTTransformerContext
         context.get_pos_info  # noqa: B018 - the method replaced below must exist
     except (ImportError, AttributeError):  # another taichi version: leave it as it is
-        return False
+        return
 
     def get_pos_info(self, node) -> str:
         return f'File "{self.file}", line {node.lineno + self.lineno_offset}, in {self.func.func.__name__}:\n'
 
     context.get_pos_info = get_pos_info
-    return True
 
 
 def ensure_taichi(arch: str = "cpu", compiler: str | None = None) -> str:

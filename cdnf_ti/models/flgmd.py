@@ -235,7 +235,8 @@ class TaichiFLGMDBackend(TaichiLGMDBackend):
         self.q_on, self.q_off = self._nd(), self._nd()
         self.a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
         self.w_on, self.w_off = p.feedback_stencils(dt)
-        self.start_gains = p.local_start_gains(dt)
+        start_on, start_off = p.local_start_gains(dt)
+        self.start_gains = (*start_on, *start_off)  # w, kappa of ON, then of OFF
         self._iterate_out = np.zeros(2)  # flgmd_iterate's residuals of ON, OFF
         self._finish_out = np.zeros(1)  # flgmd_finish's sum G
 
@@ -254,7 +255,7 @@ class TaichiFLGMDBackend(TaichiLGMDBackend):
         p = self.params
         self.K.flgmd_prepare(self.on0, self.off0, self.on[self.c], self.off[self.c], self.on[self.pi],
                              self.off[self.pi], self.q_on, self.q_off, *p.k_lateral, *self.a,
-                             p.w_i_on, p.w_i_off, *self.start_gains[0], *self.start_gains[1], self.blocks)
+                             p.w_i_on, p.w_i_off, *self.start_gains, self.blocks)
 
     def feedback_iterate(self, lam: float, mom: float = 0.0) -> tuple[float, float]:
         """One update ``X <- X + mom (X - X_prev) + lam (T(X) - X)``; returns the residuals before it."""
