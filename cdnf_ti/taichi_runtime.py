@@ -43,7 +43,7 @@ ARCHS = ("cpu", "cuda", "vulkan", "gpu")
 COMPILERS = ("taichi", "quadrants")
 #: Environment variable naming the default compiler of a process.
 COMPILER_ENV = "CDNF_TI_COMPILER"
-#: Environment variable naming the compile-cache folder (optional).
+#: Environment variable naming the compile-cache folder (optional; default: :func:`cache_folder`).
 CACHE_ENV = "CDNF_TI_CACHE_DIR"
 #: Size of the compile cache before the compiler evicts its least recently used kernels (bytes).
 #: Both compilers default to 100 MiB, which the kernels of the five models at a few frame sizes
@@ -104,6 +104,32 @@ def default_compiler() -> str:
     return have[0]
 
 
+def cache_folder(compiler: str) -> str:
+    """The folder where ``compiler`` keeps cdnf_ti's compiled kernels.
+
+    ``$CDNF_TI_CACHE_DIR`` when set, else ``cdnf_ti/<compiler>`` under ``$XDG_CACHE_HOME``
+    (``~/.cache``). cdnf_ti does not share the compiler's own folder (``~/.cache/taichi``,
+    ``~/.cache/quadrants``): every runtime trims the folder it used to its *own* size limit when
+    its process exits, so any other Taichi program, with the default 100 MiB, would evict the
+    kernels that cdnf_ti keeps up to :data:`CACHE_MAX_BYTES` (a cold start costs ~45 s). taichi 1.7
+    trims it even in a process that runs with the cache off.
+
+    Parameters
+    ----------
+    compiler : {"taichi", "quadrants"}
+
+    Returns
+    -------
+    str
+        Absolute path of the folder (created by the compiler on first use).
+    """
+    env = os.environ.get(CACHE_ENV, "").strip()
+    if env:
+        return os.path.abspath(os.path.expanduser(env))
+    base = os.environ.get("XDG_CACHE_HOME", "").strip() or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(os.path.abspath(base), "cdnf_ti", compiler)
+
+
 def lanes_override() -> int | None:
     """``$CDNF_TI_LANES`` as lanes per vector of the fast path; ``None`` when unset.
 
@@ -154,7 +180,7 @@ os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
 os.environ.setdefault("ENABLE_QUADRANTS_HEADER_PRINT", "False")
 import importlib
 ti = importlib.import_module(sys.argv[1])
-# no compile cache: at exit a runtime would trim the shared cache to the compiler's default size
+# no compile cache (this runtime still trims the compiler's default folder, never cdnf_ti's: cache_folder)
 ti.init(arch=getattr(ti, sys.argv[2]), log_level=ti.ERROR, offline_cache=False)
 impl = ti.lang.impl
 core = getattr(impl, "_ti_core", None) or getattr(impl, "_qd_core")
@@ -302,9 +328,7 @@ def ensure_taichi(arch: str = "cpu", compiler: str | None = None) -> str:
         ti = importlib.import_module(name)
         _one_line_source_positions(ti)
         kw = dict(default_fp=ti.f32, default_ip=ti.i32, offline_cache=True, log_level=ti.ERROR,
-                  offline_cache_max_size_of_files=CACHE_MAX_BYTES)
-        if os.environ.get(CACHE_ENV):  # compile cache folder (default: the compiler's, in ~/.cache)
-            kw["offline_cache_file_path"] = os.environ[CACHE_ENV]
+                  offline_cache_file_path=cache_folder(name), offline_cache_max_size_of_files=CACHE_MAX_BYTES)
         # both print "[Taichi|Quadrants] Starting on arch=..."
         with contextlib.redirect_stdout(io.StringIO()):
             ti.init(arch=getattr(ti, arch), **kw)

@@ -8,9 +8,11 @@ import numpy as np
 import pytest
 
 from cdnf_ti.taichi_runtime import (
+    CACHE_ENV,
     COMPILER_ENV,
     COMPILERS,
     LANES_ENV,
+    cache_folder,
     current_compiler,
     ensure_taichi,
     installed_compilers,
@@ -151,6 +153,67 @@ def test_the_compile_cache_keeps_a_gigabyte_of_kernels_before_it_evicts_any():
     ensure_taichi("cpu")
     cfg = dsl().lang.impl.current_cfg()
     assert cfg.offline_cache and cfg.offline_cache_max_size_of_files == CACHE_MAX_BYTES >= 1 << 30
+
+
+def test_the_compile_cache_is_cdnf_tis_own_folder_in_the_user_cache(monkeypatch, tmp_path):
+    monkeypatch.delenv(CACHE_ENV, raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert cache_folder("taichi") == str(tmp_path / "xdg" / "cdnf_ti" / "taichi")
+    assert cache_folder("quadrants") == str(tmp_path / "xdg" / "cdnf_ti" / "quadrants")
+    monkeypatch.delenv("XDG_CACHE_HOME")
+    monkeypatch.setenv("HOME", str(tmp_path))
+    assert cache_folder("taichi") == str(tmp_path / ".cache" / "cdnf_ti" / "taichi")
+
+
+def test_cdnf_ti_cache_dir_names_the_compile_cache_folder(monkeypatch, tmp_path):
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "kernels"))
+    assert cache_folder("taichi") == cache_folder("quadrants") == str(tmp_path / "kernels")
+
+
+def test_the_runtime_keeps_its_kernels_in_cdnf_tis_cache_folder():
+    from cdnf_ti.taichi_runtime import dsl
+
+    ensure_taichi("cpu")
+    folder = dsl().lang.impl.current_cfg().offline_cache_file_path
+    assert os.path.abspath(folder) == cache_folder(current_compiler())
+
+
+_KERNELS = """
+@ti.kernel
+def fill(a: ti.types.ndarray(), c: ti.template()):
+    for i in a:
+        a[i] = i * c
+a = np.zeros(8, np.float32)
+for c in range(N):
+    fill(a, c)
+"""
+
+
+@pytest.mark.parametrize("compiler", installed_compilers())
+def test_another_taichi_program_with_a_small_cache_evicts_none_of_cdnf_tis_kernels(compiler, tmp_path):
+    # every runtime trims the folder it uses to its own size limit (least recently used first, a quarter at a time)
+    env = {k: v for k, v in os.environ.items() if k not in (CACHE_ENV, "XDG_CACHE_HOME")}
+    env.update({COMPILER_ENV: compiler, "HOME": str(tmp_path)})
+    ours = ("import numpy as np\nfrom cdnf_ti.taichi_runtime import dsl, ensure_taichi\n"
+            "ensure_taichi('cpu')\nti = dsl()\nN = 8\n" + _KERNELS)
+    other = (f"import numpy as np\nimport {compiler} as ti\n"
+             "ti.init(arch=ti.cpu, offline_cache=True, offline_cache_max_size_of_files=1)\nN = 12\n" + _KERNELS)
+    folder = tmp_path / ".cache" / "cdnf_ti" / compiler
+
+    def files(root):
+        return sorted(p.relative_to(root) for p in root.rglob("*") if p.is_file())
+
+    # the other program runs twice: a runtime trims what it found in its folder, not what it just added
+    for name, code in (("ours.py", ours), ("other.py", other), ("other.py", other)):  # kernels need a file
+        (tmp_path / name).write_text(code)
+        proc = subprocess.run([sys.executable, str(tmp_path / name)], cwd=REPO, env=env, capture_output=True,
+                              text=True, timeout=300)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        if code is ours:
+            kept = files(folder)
+    theirs = files(tmp_path / ".cache" / compiler)
+    assert len(kept) > 8 and files(folder) == kept
+    assert 0 < len(theirs) < 12  # the other program's own folder was trimmed
 
 
 @pytest.mark.parametrize("compiler", installed_compilers())
