@@ -350,19 +350,41 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def measure_startup(compilers: Sequence[str], size: tuple[int, int] = (240, 426)) -> list[tuple[str, str, float]]:
+@dataclass
+class StartupRow:
+    """Start-up of one compiler with one state of its compile cache."""
+
+    compiler: str
+    cache: str  # "cold" (empty compile cache) or "warm" (the cache the cold run filled)
+    seconds: float  # fresh ``python`` to C-DNF's first solved frame; nan if the child failed
+    torch_imported: bool | None  # whether the compiler imported PyTorch on the way (None: failed)
+
+
+#: What the child process of :func:`measure_startup` runs (``{size}``: the frame shape).
+STARTUP_CODE = ("import time; t0 = time.perf_counter(); import sys; import numpy as np; from cdnf_ti import CDNF; "
+                "m = CDNF(); f = np.zeros({size}, np.float32); m.step(f); m.step(f + 0.5); "
+                "print(time.perf_counter() - t0, 'torch' in sys.modules)")
+
+
+def measure_startup(compilers: Sequence[str], size: tuple[int, int] = (240, 426)) -> list[StartupRow]:
     """Seconds from a fresh ``python`` to C-DNF's first solved frame, per compiler, cold and warm cache.
 
     "cold" runs with an empty compile cache (a fresh ``$CDNF_TI_CACHE_DIR`` folder),
-    "warm" runs again with the cache that run filled.
+    "warm" runs again with the cache that run filled. Each row also says whether PyTorch
+    was imported: quadrants imports it whenever it is installed (about 2 s of its start-up
+    here; cdnf_ti itself never imports it).
+
+    Parameters
+    ----------
+    compilers : sequence of {"taichi", "quadrants"}
+    size : (height, width)
+        Frame shape in pixels.
     """
     import os
     import subprocess
     import tempfile
 
-    code = ("import time; t0 = time.perf_counter(); import numpy as np; from cdnf_ti import CDNF; "
-            f"m = CDNF(); f = np.zeros({size}, np.float32); m.step(f); m.step(f + 0.5); "
-            "print(time.perf_counter() - t0)")
+    code = STARTUP_CODE.format(size=tuple(size))
     out = []
     for comp in compilers:
         with tempfile.TemporaryDirectory() as cache:
@@ -371,16 +393,21 @@ def measure_startup(compilers: Sequence[str], size: tuple[int, int] = (240, 426)
                 t0 = time.perf_counter()
                 proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
                 wall = time.perf_counter() - t0
-                if proc.returncode != 0:
-                    out.append((comp, label, float("nan")))
+                words = proc.stdout.split()
+                if proc.returncode != 0 or not words:
+                    out.append(StartupRow(comp, label, float("nan"), None))
                 else:
-                    out.append((comp, label, wall))
+                    out.append(StartupRow(comp, label, wall, words[-1] == "True"))
     return out
 
 
-def format_startup(rows: Sequence[tuple[str, str, float]]) -> str:
-    lines = ["| compiler | cache | start-up to first frame (s) |", "|---|---|---|"]
-    lines += [f"| {c} | {k} | {t:.2f} |" for c, k, t in rows]
+def format_startup(rows: Sequence[StartupRow]) -> str:
+    """The start-up rows as a Markdown table."""
+    def torch(r: StartupRow) -> str:
+        return "failed" if r.torch_imported is None else ("yes" if r.torch_imported else "no")
+
+    lines = ["| compiler | cache | start-up to first frame (s) | PyTorch imported |", "|---|---|---|---|"]
+    lines += [f"| {r.compiler} | {r.cache} | {r.seconds:.2f} | {torch(r)} |" for r in rows]
     return "\n".join(lines)
 
 

@@ -169,3 +169,53 @@ def test_bench_command_rejects_a_missing_clip_with_one_line(capsys):
     err = capsys.readouterr().err
     assert rc == 2
     assert err.startswith("error: /nonexistent/clip.mp4:") and err.count("\n") == 1
+
+
+def test_startup_runs_each_compiler_cold_then_warm_in_a_fresh_cache_folder_of_its_own(monkeypatch):
+    import subprocess
+    from types import SimpleNamespace
+
+    from cdnf_ti.bench import cli
+
+    calls = []
+
+    def fake_run(cmd, env, **kw):
+        calls.append((env["CDNF_TI_COMPILER"], env["CDNF_TI_CACHE_DIR"]))
+        return SimpleNamespace(returncode=0, stdout=f"1.5 {env['CDNF_TI_COMPILER'] == 'quadrants'}\n")
+
+    monkeypatch.setattr(subprocess, "run", fake_run)
+    rows = cli.measure_startup(["taichi", "quadrants"], size=(24, 40))
+    assert [(r.compiler, r.cache, r.torch_imported) for r in rows] == [
+        ("taichi", "cold", False), ("taichi", "warm", False), ("quadrants", "cold", True), ("quadrants", "warm", True)]
+    assert [c for c, _ in calls] == ["taichi", "taichi", "quadrants", "quadrants"]
+    assert calls[0][1] == calls[1][1] != calls[2][1] == calls[3][1]
+    assert all(r.seconds > 0 for r in rows)
+
+
+def test_startup_of_a_failed_child_is_nan_and_the_table_says_failed(monkeypatch):
+    import subprocess
+    from types import SimpleNamespace
+
+    from cdnf_ti.bench import cli
+
+    monkeypatch.setattr(subprocess, "run", lambda cmd, env, **kw: SimpleNamespace(returncode=1, stdout=""))
+    rows = cli.measure_startup(["taichi"])
+    assert all(np.isnan(r.seconds) and r.torch_imported is None for r in rows)
+    assert cli.format_startup(rows).splitlines()[2:] == ["| taichi | cold | nan | failed |",
+                                                         "| taichi | warm | nan | failed |"]
+
+
+def test_the_startup_child_solves_a_frame_and_says_whether_pytorch_was_imported():
+    import os
+    import subprocess
+    import sys
+
+    from cdnf_ti.bench.cli import STARTUP_CODE
+    from cdnf_ti.taichi_runtime import COMPILER_ENV, current_compiler
+
+    env = dict(os.environ, **{COMPILER_ENV: current_compiler()})  # this process's compile cache: warm
+    proc = subprocess.run([sys.executable, "-c", STARTUP_CODE.format(size=(24, 40))], env=env, capture_output=True,
+                          text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    seconds, torch_imported = proc.stdout.split()
+    assert float(seconds) > 0 and torch_imported in ("True", "False")
