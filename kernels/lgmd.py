@@ -238,6 +238,16 @@ def lgmd2_layers(
 
 
 @ti.func
+def lgmd1_summation(on, off, i_on, exc_off, w_i_on, w_i_off, e, t_s):
+    """LGMD1's ``S = e_on S_on + e_off S_off + e_onoff S_on S_off``, kept where ``S >= t_s``, with
+    ``S_on = ON - w_i_on I_on`` and ``S_off = E_off - w_i_off OFF``."""
+    s_on = on - w_i_on * i_on
+    s_off = exc_off - w_i_off * off
+    s = e[0] * s_on + e[1] * s_off + e[2] * s_on * s_off
+    return ti.select(s >= t_s, s, 0.0)
+
+
+@ti.func
 def _lgmd1_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
     on, off, on_p, off_p, I_on, E_off, S = ti.static(ctx[0], ctx[1], ctx[2], ctx[3], ctx[4], ctx[5], ctx[6])
     k, a, w_i_on, w_i_off, e, t_s = ctx[7], ctx[8], ctx[9], ctx[10], ctx[11], ctx[12]
@@ -245,10 +255,8 @@ def _lgmd1_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
     e_o = _delayed(off, off_p, im, i, ip, jm, j, jp, n, 0.0, k[0], k[1], 0.0, a[0], a[1])
     run_store(I_on, i, j, i_on, n)
     run_store(E_off, i, j, e_o, n)
-    s_on = run_load(on, i, j, n) - w_i_on * i_on
-    s_off = e_o - w_i_off * run_load(off, i, j, n)
-    s = e[0] * s_on + e[1] * s_off + e[2] * s_on * s_off
-    run_store(S, i, j, ti.select(s >= t_s, s, 0.0), n)
+    run_store(S, i, j, lgmd1_summation(run_load(on, i, j, n), run_load(off, i, j, n), i_on, e_o, w_i_on, w_i_off,
+                                       e, t_s), n)
     return 0.0
 
 
@@ -585,6 +593,22 @@ def _lane_box_row(S: ti.template(), out: ti.template(), i, H, W: ti.template(), 
     return acc
 
 
+@ti.func
+def _lane_group_phase(S: ti.template(), G: ti.template(), msum: ti.template(), sync: ti.template(), phase, w, nw, H,
+                      W: ti.template()):
+    """Worker ``w``'s part of ``phase``: ``G = S (*) ones/9`` on each row it claims; adds their
+    sum of ``G`` to ``msum[0]``."""
+    while True:
+        i0, i1 = claim_rows(sync, phase, w, nw, H)
+        if i0 >= i1:
+            break
+        acc = ti.f64(0.0)
+        for i in range(i0, i1):
+            acc += _lane_box_row(S, G, i, H, W, "sum")
+        ti.atomic_add(msum[0], acc)
+        finish_rows(sync, phase, i1 - i0)
+
+
 @ti.kernel
 def flgmd_lanes_solve(
     on0: ti.template(), off0: ti.template(), on: ti.template(), off: ti.template(), q_on: ti.template(),
@@ -655,15 +679,7 @@ def flgmd_lanes_solve(
                         _lane_finish_row(on, off, f_on, f_off, q_on, q_off, S_on, S_off, S, i, H, wn, wf, t_s, W)
                     finish_rows(sync, FINISH_PHASE, i1 - i0)
                 wait_phase(sync, FINISH_PHASE, H)
-                while True:
-                    i0, i1 = claim_rows(sync, GROUP_PHASE, w, nw, H)
-                    if i0 >= i1:
-                        break
-                    acc = ti.f64(0.0)
-                    for i in range(i0, i1):
-                        acc += _lane_box_row(S, G, i, H, W, "sum")
-                    ti.atomic_add(msum[0], acc)
-                    finish_rows(sync, GROUP_PHASE, i1 - i0)
+                _lane_group_phase(S, G, msum, sync, GROUP_PHASE, w, nw, H, W)
                 msum[1] = 1.0
     record_residuals(rbuf, record, 2)
     out[0] = -1.0
@@ -693,28 +709,48 @@ def flgmd_lanes_finish(
         ti.atomic_add(out[0], _lane_box_row(S, G, i, H, W, "sum"))
 
 
-# -- LGMD2 on lane fields: the layers of a frame in one launch ---------------------------
-# Phase 0: delayed inhibitions and S; phase 1: Ce and max |Ce|; phase 2: G and sum G.
+# -- LGMD1 and LGMD2 on lane fields: the layers of a frame in one launch -------------------
+# Phase 0: the delayed layers and S (:func:`_lane_delayed_phase`); then LGMD2: phase 1, Ce and
+# max |Ce|; phase 2, G and sum G. LGMD1: phase 1, G and sum G (:func:`_lane_group_phase`, as F-LGMD).
 
 
 @ti.func
-def _lane_lgmd2_row(on: ti.template(), off: ti.template(), c, q, I_on: ti.template(), I_off: ti.template(),
-                    S: ti.template(), i, H, kn, an, kf, af, w_on, w_off, e3, W: ti.template()):
-    """Row ``i`` of ``I_on``, ``I_off`` and ``S`` (channels: buffer ``c`` now, ``q`` the frame before)."""
+def _lane_delayed_row(on: ti.template(), off: ti.template(), c, q, X_on: ti.template(), X_off: ti.template(),
+                      S: ti.template(), i, H, kn, an, kf, af, model: ti.template(), sp, e3, W: ti.template()):
+    """Row ``i`` of the delayed layers ``X_on``/``X_off`` (:func:`delayed_mix` of ON/OFF: buffer ``c``
+    now, ``q`` the frame before) and of ``S``: :func:`lgmd1_summation` (``model == "lgmd1"``;
+    ``sp = (w_i_on, w_i_off, t_s)``) or :func:`lgmd2_summation` (``sp = (w_on, w_off, -)``)."""
     E1 = ti.static((LANES + W - 1) // LANES)
     im = ti.max(i - 1, 0)
     ip = ti.min(i + 1, H - 1)
     for e in range(1, E1 + 1):
         cn, en, dn = lane_edge_diag(on, c, im, i, ip, e)
         cnp, enp, dnp = lane_edge_diag(on, q, im, i, ip, e)
-        i_on = delayed_mix(cn, en, dn, cnp, enp, dnp, kn[0], kn[1], kn[2], an[0], an[1], an[2])
+        x_on = delayed_mix(cn, en, dn, cnp, enp, dnp, kn[0], kn[1], kn[2], an[0], an[1], an[2])
         cf, ef, df = lane_edge_diag(off, c, im, i, ip, e)
         cfp, efp, dfp = lane_edge_diag(off, q, im, i, ip, e)
-        i_off = delayed_mix(cf, ef, df, cfp, efp, dfp, kf[0], kf[1], kf[2], af[0], af[1], af[2])
-        I_on[i, e] = i_on
-        I_off[i, e] = i_off
-        S[i, e] = lgmd2_summation(cn, cf, i_on, i_off, w_on, w_off, e3)
+        x_off = delayed_mix(cf, ef, df, cfp, efp, dfp, kf[0], kf[1], kf[2], af[0], af[1], af[2])
+        X_on[i, e] = x_on
+        X_off[i, e] = x_off
+        if ti.static(model == "lgmd1"):
+            S[i, e] = lgmd1_summation(cn, cf, x_on, x_off, sp[0], sp[1], e3, sp[2])
+        else:
+            S[i, e] = lgmd2_summation(cn, cf, x_on, x_off, sp[0], sp[1], e3)
     fill_ghosts(S, 0, i, 1, 1, W, 1, REPLICATE)
+
+
+@ti.func
+def _lane_delayed_phase(on: ti.template(), off: ti.template(), c, q, X_on: ti.template(), X_off: ti.template(),
+                        S: ti.template(), kn, an, kf, af, model: ti.template(), sp, e3, sync: ti.template(), phase,
+                        w, nw, H, W: ti.template()):
+    """Worker ``w``'s part of ``phase``: :func:`_lane_delayed_row` on each row it claims."""
+    while True:
+        i0, i1 = claim_rows(sync, phase, w, nw, H)
+        if i0 >= i1:
+            break
+        for i in range(i0, i1):
+            _lane_delayed_row(on, off, c, q, X_on, X_off, S, i, H, kn, an, kf, af, model, sp, e3, W)
+        finish_rows(sync, phase, i1 - i0)
 
 
 @ti.kernel
@@ -737,18 +773,13 @@ def lgmd2_lanes_layers(
     kf = ti.Vector([kf0, kf1, kf2])
     af = ti.Vector([af0, af1, af2])
     e3 = ti.Vector([e_on, e_off, e_onoff])
+    sp = ti.Vector([w_on, w_off, 0.0])
     reset_sync(sync, rbuf, nw)
     msum[0] = 0.0
     for slot in range(nw * WORKER_STRIDE):
         if slot % WORKER_STRIDE == 0:
             w = slot // WORKER_STRIDE
-            while True:
-                i0, i1 = claim_rows(sync, 0, w, nw, H)
-                if i0 >= i1:
-                    break
-                for i in range(i0, i1):
-                    _lane_lgmd2_row(on, off, c, q, I_on, I_off, S, i, H, kn, an, kf, af, w_on, w_off, e3, W)
-                finish_rows(sync, 0, i1 - i0)
+            _lane_delayed_phase(on, off, c, q, I_on, I_off, S, kn, an, kf, af, "lgmd2", sp, e3, sync, 0, w, nw, H, W)
             wait_phase(sync, 0, H)
             while True:
                 i0, i1 = claim_rows(sync, 1, w, nw, H)
@@ -776,3 +807,31 @@ def lgmd2_lanes_layers(
                 finish_rows(sync, 2, i1 - i0)
     out[0] = msum[0]
     out[1] = ti.cast(ti.max(rbuf[0, 0], 0.0), ti.f64)
+
+
+@ti.kernel
+def lgmd1_lanes_layers(
+    on: ti.template(), off: ti.template(), c: ti.i32, q: ti.i32, I_on: ti.template(), E_off: ti.template(),
+    S: ti.template(), G: ti.template(), w_i_on: ti.f32, w_i_off: ti.f32, k1: ti.f32, k2: ti.f32, a1: ti.f32,
+    a2: ti.f32, e_on: ti.f32, e_off: ti.f32, e_onoff: ti.f32, t_s: ti.f32,
+    nw: ti.i32, sync: ti.template(), rbuf: ti.template(), msum: ti.template(), W: ti.template(), out: D1,
+):
+    """:func:`lgmd1_layers` on lane fields, in one launch by persistent workers (channels:
+    buffer ``c`` of ``on``/``off`` now, ``q`` the frame before).
+
+    Writes ``out[0] = sum G`` in its serial tail.
+    """
+    H = S.shape[0]
+    k = ti.Vector([0.0, k1, k2])  # centre 0
+    a = ti.Vector([0.0, a1, a2])
+    e3 = ti.Vector([e_on, e_off, e_onoff])
+    sp = ti.Vector([w_i_on, w_i_off, t_s])
+    reset_sync(sync, rbuf, nw)
+    msum[0] = 0.0
+    for slot in range(nw * WORKER_STRIDE):
+        if slot % WORKER_STRIDE == 0:
+            w = slot // WORKER_STRIDE
+            _lane_delayed_phase(on, off, c, q, I_on, E_off, S, k, a, k, a, "lgmd1", sp, e3, sync, 0, w, nw, H, W)
+            wait_phase(sync, 0, H)
+            _lane_group_phase(S, G, msum, sync, 1, w, nw, H, W)
+    out[0] = msum[0]

@@ -1,7 +1,7 @@
-"""The lane-vectorised fast paths of LGMD2 and F-LGMD against the NumPy float64 references.
+"""The lane-vectorised fast paths of LGMD1, LGMD2 and F-LGMD against the NumPy float64 references.
 
 Every kernel of the fast paths (``kernels/lgmd.py``: ``lgmd_lanes_load``,
-``lgmd2_lanes_layers``, ``flgmd_lanes_*``) is checked against
+``lgmd1_lanes_layers``, ``lgmd2_lanes_layers``, ``flgmd_lanes_*``) is checked against
 :mod:`cdnf_ti.baselines_reference` on generated stimuli (basic, noisy, dashcam-like
 stand-in video and, when ``../shared`` is there, a real clip), at widths that are and
 are not multiples of the lane width; F-LGMD's solve converging inside its launch and
@@ -19,13 +19,14 @@ from cdnf_ti.bench.inputs import real_or_standin, standin_video
 from cdnf_ti.kernels.common import LANES
 from cdnf_ti.models import FLGMDParams, create_model
 from cdnf_ti.models.flgmd import FEEDBACK_STARTS, LaneTaichiFLGMDBackend, TaichiFLGMDBackend
+from cdnf_ti.models.lgmd1 import LaneTaichiLGMD1Backend, TaichiLGMD1Backend
 from cdnf_ti.models.lgmd2 import LaneTaichiLGMD2Backend, TaichiLGMD2Backend
 
 ALWAYS_ON = FLGMDParams(t_ffi=1e9)  # no FFI hold: the per-pixel layers run on every frame
-FAST_MODELS = ["lgmd2", "flgmd_onn"]
-LANE_BACKEND = {"lgmd2": LaneTaichiLGMD2Backend, "flgmd_onn": LaneTaichiFLGMDBackend}
-GENERIC_BACKEND = {"lgmd2": TaichiLGMD2Backend, "flgmd_onn": TaichiFLGMDBackend}
-STEPS = {"lgmd2": "max_Ce", "flgmd_onn": "iterations"}  # a per-frame diagnostic of the per-pixel layers
+FAST_MODELS = ["lgmd1", "lgmd2", "flgmd_onn"]
+LANE_BACKEND = {"lgmd1": LaneTaichiLGMD1Backend, "lgmd2": LaneTaichiLGMD2Backend, "flgmd_onn": LaneTaichiFLGMDBackend}
+GENERIC_BACKEND = {"lgmd1": TaichiLGMD1Backend, "lgmd2": TaichiLGMD2Backend, "flgmd_onn": TaichiFLGMDBackend}
+STEPS = {"lgmd1": "sum_G", "lgmd2": "max_Ce", "flgmd_onn": "iterations"}  # a per-frame diagnostic of the layers
 
 
 def default_params(model):
@@ -118,6 +119,32 @@ def test_unconverged_launches_finish_the_layers_in_a_separate_kernel():
     assert_fields_close(fast, ref)
 
 
+def burst_then_calm():
+    """Dashcam-like frames (every pixel moves), then a dark square moving over the last one: 120 x 70."""
+    busy = [f[::2, ::3][:, :70] for f in standin_video(6, seed=4)]
+    calm = []
+    for k in range(8):
+        f = busy[-1].copy()
+        f[20 + 2 * k:30 + 2 * k, 20:34] = 10
+        calm.append(f)
+    return busy + calm
+
+
+@pytest.mark.parametrize("model", ["lgmd1", "flgmd_onn"])  # the models with feed-forward inhibition
+def test_frames_that_ffi_holds_drop_their_channels_as_in_the_reference(model):
+    frames = burst_then_calm()
+    ffi = create_model(model, backend="numpy").run(frames).diagnostics["FFI"]
+    t_ffi = 0.5 * (ffi.max() + ffi[-1])  # held around the burst, computed again once it calms down
+    params = create_model(model).params_type(t_ffi=float(t_ffi))
+    fast, a, ref, b = run_fast_and_reference(frames, params, model)
+    held = b.diagnostics["held"]
+    assert held.any() and not held[-1] and b.diagnostics["sum_G"][-1] > 0
+    np.testing.assert_array_equal(a.diagnostics["held"], held)
+    np.testing.assert_allclose(a.output, b.output, atol=1e-5, rtol=0)
+    np.testing.assert_allclose(a.diagnostics["sum_G"], b.diagnostics["sum_G"], rtol=1e-4, atol=1e-3)
+    assert_fields_close(fast, ref)
+
+
 @pytest.mark.parametrize("model", FAST_MODELS)
 def test_fast_and_generic_kernels_give_the_same_trace(model):
     frames = noisy_stream("light_looming", seed=11, w=70)
@@ -196,7 +223,7 @@ def test_launch_gives_the_same_results_with_any_number_of_workers(model, workers
     other._be.nw = workers
     got = other.run(frames)
     np.testing.assert_allclose(got.output, two.output, atol=1e-12, rtol=0)
-    np.testing.assert_array_equal(got.diagnostics[STEPS[model]], two.diagnostics[STEPS[model]])
+    np.testing.assert_allclose(got.diagnostics[STEPS[model]], two.diagnostics[STEPS[model]], rtol=1e-12, atol=0)
 
 
 @pytest.mark.parametrize("model", FAST_MODELS)

@@ -27,7 +27,7 @@ import numpy as np
 from ..baselines_reference import NumpyLGMD1Backend
 from ..params import ModelParams, check_params
 from .base import StepResult
-from .lgmd2 import LGMDFamily, TaichiLGMDBackend, lowpass_coefficient
+from .lgmd2 import LGMDFamily, LGMDLanes, PingPongLaneLGMDBackend, TaichiLGMDBackend, lowpass_coefficient
 from .registry import register_model
 
 
@@ -124,6 +124,34 @@ class TaichiLGMD1Backend(TaichiLGMDBackend):
         return float(out[0])
 
 
+class _LGMD1Lanes(LGMDLanes):
+    LAYERS = ("L", "P", "on", "off", "I_on", "E_off", "S", "G")
+
+
+class LaneTaichiLGMD1Backend(PingPongLaneLGMDBackend):
+    """LGMD1 layers on lane fields (see :class:`LGMD1`): a frame's layers in one launch."""
+
+    workspace_type = _LGMD1Lanes
+    FIELD_LAYERS = ("I_on", "E_off", "S", "G")
+
+    def _setup(self) -> None:
+        p, dt = self.params, self.dt
+        self.a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
+        self._layers_out = np.zeros(1)  # lgmd1_lanes_layers' sum G
+
+    def layers(self) -> float:
+        """Delayed spreads, S (thresholded), G (ON/OFF from :meth:`load`); returns ``sum G``."""
+        ws = self._acquire()
+        p = self.params
+        c, q = self._next_buffers()
+        out = self._layers_out
+        out.fill(0.0)
+        self.K.lgmd1_lanes_layers(ws.on, ws.off, c, q, ws.I_on, ws.E_off, ws.S, ws.G, p.w_i_on, p.w_i_off,
+                                  *p.k_lateral, *self.a, p.w_on_exc, p.w_off_exc, p.w_onoff, p.t_s, self.nw,
+                                  ws.sync, ws.rbuf, ws.msum, self.W, out)
+        return float(out[0])
+
+
 @register_model
 class LGMD1(LGMDFamily):
     """LGMD1 with ON/OFF pathways and SFA (Fu et al. 2018).
@@ -149,6 +177,7 @@ class LGMD1(LGMDFamily):
 
     taichi_backend_type = TaichiLGMD1Backend
     numpy_backend_type = NumpyLGMD1Backend
+    lane_backend_type = LaneTaichiLGMD1Backend
 
     def _step(self, t: int, grey: np.ndarray, sum_p: float) -> StepResult:
         p = self.params

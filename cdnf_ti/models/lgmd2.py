@@ -409,11 +409,32 @@ class LaneTaichiLGMDBackend:
         return out
 
 
+class PingPongLaneLGMDBackend(LaneTaichiLGMDBackend):
+    """A lane backend whose channels have two buffers: :meth:`load` writes the channels of the
+    new frame into the other buffer, and the layers make it current (:meth:`_next_buffers`). A
+    frame that FFI holds runs no layers, so its channels are dropped, as in the ndarray backend."""
+
+    def _reset_buffers(self) -> None:
+        self.c = 0  # the current ON/OFF buffers; load writes the other ones
+
+    def load(self, grey: np.ndarray, first: bool) -> float:
+        n = 1 - self.c
+        return self._load(grey, first, self.c, n, self.c, n)
+
+    def _next_buffers(self) -> tuple[int, int]:
+        """Make the other ON/OFF buffers current: ``(current, previous)`` indices."""
+        q, self.c = self.c, 1 - self.c
+        return self.c, q
+
+    def _channel_buffers(self) -> tuple[int, int]:
+        return self.c, self.c
+
+
 class _LGMD2Lanes(LGMDLanes):
     LAYERS = ("L", "P", "on", "off", "I_on", "I_off", "S", "Ce", "G")
 
 
-class LaneTaichiLGMD2Backend(LaneTaichiLGMDBackend):
+class LaneTaichiLGMD2Backend(PingPongLaneLGMDBackend):
     """LGMD2 layers on lane fields (see :class:`LGMD2`): a frame's layers in one launch."""
 
     workspace_type = _LGMD2Lanes
@@ -425,27 +446,17 @@ class LaneTaichiLGMD2Backend(LaneTaichiLGMDBackend):
         self.af = tuple(lowpass_coefficient(dt, t) for t in p.tau_off)
         self._layers_out = np.zeros(2)  # lgmd2_lanes_layers' sum G, max |Ce|
 
-    def _reset_buffers(self) -> None:
-        self.c = 0  # the current ON/OFF buffers; load writes the other ones
-
-    def load(self, grey: np.ndarray, first: bool) -> float:
-        n = 1 - self.c
-        return self._load(grey, first, self.c, n, self.c, n)
-
     def layers(self, w_on: float, w_off: float) -> tuple[float, float]:
         """Delayed inhibition, S, grouping (ON/OFF from :meth:`load`); returns ``(sum G, max |Ce|)``."""
         ws = self._acquire()
         p = self.params
-        q, self.c = self.c, 1 - self.c
+        c, q = self._next_buffers()
         out = self._layers_out
         out.fill(0.0)
-        self.K.lgmd2_lanes_layers(ws.on, ws.off, self.c, q, ws.I_on, ws.I_off, ws.S, ws.Ce, ws.G, w_on, w_off,
+        self.K.lgmd2_lanes_layers(ws.on, ws.off, c, q, ws.I_on, ws.I_off, ws.S, ws.Ce, ws.G, w_on, w_off,
                                   *p.k_on, *self.an, *p.k_off, *self.af, p.w_on_exc, p.w_off_exc, p.w_onoff,
                                   p.delta_c, p.c_w, p.c_de, p.t_de, self.nw, ws.sync, ws.rbuf, ws.msum, self.W, out)
         return float(out[0]), float(out[1])
-
-    def _channel_buffers(self) -> tuple[int, int]:
-        return self.c, self.c
 
 
 class LGMDFamily(Model):
