@@ -109,10 +109,10 @@ def cache_folder(compiler: str) -> str:
 
     ``$CDNF_TI_CACHE_DIR`` when set, else ``cdnf_ti/<compiler>`` under ``$XDG_CACHE_HOME``
     (``~/.cache``). cdnf_ti does not share the compiler's own folder (``~/.cache/taichi``,
-    ``~/.cache/quadrants``): every runtime trims the folder it used to its *own* size limit when
-    its process exits, so any other Taichi program, with the default 100 MiB, would evict the
-    kernels that cdnf_ti keeps up to :data:`CACHE_MAX_BYTES` (a cold start costs ~45 s). taichi 1.7
-    trims it even in a process that runs with the cache off.
+    ``~/.cache/quadrants``): every runtime trims the kernels it found in its folder to its *own*
+    size limit, so any other Taichi program, with the default 100 MiB, would evict the kernels
+    that cdnf_ti keeps up to :data:`CACHE_MAX_BYTES` (a cold start costs ~45 s); taichi 1.7 does
+    so even in a process that runs with the cache off.
 
     Parameters
     ----------
