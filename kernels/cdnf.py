@@ -450,7 +450,7 @@ def _relax(x: ti.template(), p, q, i, e, inp, lateral, h, lam, mom, tau, W: ti.t
     nx, d = field_update(inp, lateral, xc, x[q, i, e], h, lam, mom)
     ad = ti.abs(d) * lane_mask(e, W)
     x[q, i, e] = ti.select(ad > tau, nx, xc)
-    moved = ad.max() > tau
+    moved = run_max(ad, LANES) > tau
     return ti.max(m, ad), ti.select(moved, ti.min(lo, e), lo), ti.select(moved, e, hi)
 
 
@@ -551,8 +551,8 @@ def lanes_contrast_solve(
                                                                       e0, e1, k0, k1, h, lam, mom, tau, W)
                                 fill_ghosts(u_on, q, i, e0 == 1, e1 == E1 + 1, W, 1, mode)
                                 fill_ghosts(u_off, q, i, e0 == 1, e1 == E1 + 1, W, 1, mode)
-                                m_on = ti.max(m_on, r_on.max())
-                                m_off = ti.max(m_off, r_off.max())
+                                m_on = ti.max(m_on, run_max(r_on, LANES))
+                                m_off = ti.max(m_off, run_max(r_off, LANES))
                                 lo = ti.min(lo_on, lo_off)
                                 hi = ti.max(hi_on, hi_off)
                             pend[q, i] = ti.Vector([lo, hi])
@@ -666,7 +666,7 @@ def lanes_summation_kernel(g1: tuple, g2: tuple):
                                         m, lo, hi = _relax(v, p, q, i, e, S[i, e], A * b1 - B * b2, h, lam, mom, tau,
                                                            W, m, lo, hi)
                                     fill_ghosts(v, q, i, e0 == 1, e1 == E1 + 1, W, R, mode)
-                                    mx = ti.max(mx, m.max())
+                                    mx = ti.max(mx, run_max(m, LANES))
                                 pend[q, i] = ti.Vector([lo, hi])
                             ti.atomic_max(rbuf[j, 0], mx)
                             finish_rows(sync, 2 * j + 1, i1 - i0)

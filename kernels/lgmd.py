@@ -549,7 +549,7 @@ def _lane_update_row(x0: ti.template(), x: ti.template(), q: ti.template(), p, n
     for e in range(1, E1 + 1):
         m = ti.max(m, _lane_relax(x0, x, q, p, n, im, i, ip, e, w, beta, lam, mom, W))
     fill_ghosts(x, n, i, 1, 1, W, 1, REPLICATE)
-    return m.max()
+    return run_max(m, LANES)
 
 
 @ti.func
@@ -587,7 +587,7 @@ def _lane_box_row(S: ti.template(), out: ti.template(), i, H, W: ti.template(), 
         out[i, e] = b
         v = b * lane_mask(e, W)
         if ti.static(reduce == "max"):
-            acc = ti.max(acc, ti.cast(ti.abs(v).max(), ti.f64))
+            acc = ti.max(acc, ti.cast(run_max(ti.abs(v), LANES), ti.f64))
         else:
             acc += ti.cast(v.sum(), ti.f64)
     return acc

@@ -1,6 +1,5 @@
 """Row runs (kernels/common.py): the comparison models match their float64 references on frame
 sizes around the run lengths (16- and 4-column runs, single border columns, the smallest 2x2 frames)."""
-from __future__ import annotations
 
 import numpy as np
 import pytest
@@ -38,3 +37,32 @@ def test_taichi_matches_numpy_reference_at_every_frame_size(model, size):
     for k in fb:
         scale = max(1.0, float(np.abs(fb[k]).max()))
         np.testing.assert_allclose(fa[k], fb[k], atol=1e-4 * scale, rtol=0, err_msg=k)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 5, 7, 16, 32])
+def test_run_max_is_the_largest_value_and_leaves_its_argument_unchanged(n):
+    """``run_max`` (a tree of pairwise maxima, also the lane vectors' reduction) equals NumPy's max
+    wherever the largest value sits, negatives and ties included, and its caller's vector is not changed."""
+    from cdnf_ti.kernels.common import run_max
+    from cdnf_ti.taichi_runtime import dsl
+
+    ti = dsl()
+
+    @ti.kernel
+    def reduce_rows(values: ti.types.ndarray(dtype=ti.f32, ndim=2), out: ti.types.ndarray(dtype=ti.f32, ndim=1),
+                    after: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+        for r in range(values.shape[0]):
+            v = ti.Vector([values[r, c] for c in ti.static(range(n))], dt=ti.f32)
+            out[r] = run_max(v, n)
+            for c in ti.static(range(n)):
+                after[r, c] = v[c]
+
+    rng = np.random.default_rng(n)
+    rows = [np.full(n, -1.0)] + [np.where(np.arange(n) == k, 2.5, -rng.random(n)) for k in range(n)]
+    rows += [rng.normal(size=n) for _ in range(8)] + [np.full(n, 0.25)]
+    values = np.array(rows, dtype=np.float32)
+    out = np.zeros(len(values), np.float32)
+    after = np.zeros_like(values)
+    reduce_rows(values, out, after)
+    np.testing.assert_array_equal(out, values.max(axis=1))
+    np.testing.assert_array_equal(after, values)
