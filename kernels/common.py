@@ -167,8 +167,8 @@ def run_max(v, n: ti.template()):
     A tree of pairwise maxima: a chain ``max(max(v0, v1), v2)...`` has ``n - 1`` dependent
     steps, which the vectoriser leaves scalar; halving ``log2(n)`` times gives the same value
     (a maximum does not depend on the order) in vector instructions. It runs once per element
-    in the solves' update loops: the chain cost 8 % of a full-frame ON/OFF update and 18 % of a
-    Summation update at 32 lanes (docs/PERFORMANCE.md, round 13).
+    in the solves' update loops, where the tree made a full-frame ON/OFF update 11 % and a
+    Summation update 23 % faster at 32 lanes (docs/PERFORMANCE.md, round 13).
     """
     b = v  # a copy: ti.func arguments are passed by value
     for width in ti.static(_halvings(n)):
