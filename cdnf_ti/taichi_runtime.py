@@ -382,3 +382,82 @@ def cpu_threads() -> int:
     except (AttributeError, TypeError, ValueError):  # a compiler without this config field
         n = os.cpu_count() or 1
     return max(1, n)
+
+
+# -- kernels compiled with explicit vector types ------------------------------------------
+# Both compilers normally scalarise ``ti.Vector`` values (``real_matrix_scalarize``, on by
+# default) and leave it to LLVM's vectorisers to put them back together: taichi 1.7.4 does so
+# 128 bits wide on the Zen 5 host (its LLVM 15 does not know the CPU), quadrants 1.3.3 not at
+# all (its pipeline leaves the SLP vectoriser off; docs/PERFORMANCE.md, round 8). Compiled with
+# the option off, a vector stays an LLVM vector type, which the code generator, which does see
+# the host's AVX-512, lowers to full-width registers: C-DNF's lane solves ran 1.8x (taichi) and
+# 2.9-3.7x (quadrants) faster per update (round 14). The option is part of the runtime's compile
+# configuration, read while a kernel compiles (and part of the compile cache's key), so
+# :func:`vector_kernel` turns it off around the compilation of the kernels made for it only.
+
+_vector_compile_lock = threading.Lock()
+
+
+def vector_kernel(kernel):
+    """Compile the ``@ti.kernel`` ``kernel`` with explicit vector types (``real_matrix_scalarize`` off).
+
+    Returns a function that launches ``kernel`` with the same arguments. The first launch
+    with a new compile signature (the values of its ``ti.template()`` arguments, the type,
+    dtype and ndim of its array arguments: what makes the compiler build another instance)
+    runs with the option off, under a lock, and restores it: that launch compiles the
+    instance. Every other launch is a plain call, the option untouched. So only these
+    kernels compile in that mode; the option is off only while one of their instances is
+    compiled and first run (at a model's warm-up), when a kernel of another model compiled
+    at the same moment by another Python thread would compile in that mode too.
+
+    The kernel may hold only constructs that both compilers handle on unscalarised vectors:
+    no ``Vector.field`` access (use vector ``ndarray`` arguments), no unary minus or
+    ``ti.abs`` on a vector (``0.0 - x``, :func:`cdnf_ti.kernels.common.lane_abs`) and no
+    ``.any()``/``.all()``, which taichi 1.7.4 gets wrong in this mode
+    (:func:`cdnf_ti.kernels.common.any_lane`).
+
+    Parameters
+    ----------
+    kernel : a ``@ti.kernel`` function of the running compiler (:func:`dsl`)
+
+    Returns
+    -------
+    callable
+        ``launch(*args)``, positional arguments as for ``kernel``.
+    """
+    import functools
+    import inspect
+
+    ti = dsl()
+    params = list(inspect.signature(kernel).parameters.values())
+    template = type(ti.template())
+    ndarray = type(ti.types.ndarray())
+    templates = tuple(k for k, p in enumerate(params) if isinstance(p.annotation, template))
+    arrays = tuple(k for k, p in enumerate(params) if isinstance(p.annotation, ndarray))
+    compiled: set[tuple] = set()
+
+    def signature(args: tuple) -> tuple:
+        key = [args[k] if isinstance(args[k], (int, str)) else id(args[k]) for k in templates]
+        key += [(type(args[k]), str(args[k].dtype), len(args[k].shape)) for k in arrays]
+        return tuple(key)
+
+    @functools.wraps(kernel)
+    def launch(*args):
+        sig = signature(args)
+        if sig in compiled:
+            return kernel(*args)
+        # a new instance: both compilers build its code on its first launch (the AST in
+        # ``materialize``, the machine code in ``launch_kernel``), so the option stays off
+        # for that whole launch; later launches reuse the code.
+        with _vector_compile_lock:
+            cfg = ti.lang.impl.current_cfg()
+            cfg.real_matrix_scalarize = False
+            try:
+                out = kernel(*args)
+            finally:
+                cfg.real_matrix_scalarize = True
+            compiled.add(sig)
+        return out
+
+    launch.kernel = kernel  # the kernel itself
+    return launch

@@ -6,10 +6,14 @@ Two sets of kernels compute the same equations:
   take ``ti.ndarray``/NumPy arrays of shape (H, W), so one compiled kernel serves
   every frame size; used for frames narrower than ``2 * LANES`` pixels and on GPUs
   (up to ``MAX_STEPS`` updates per launch, one parallel loop each);
-* the fast CPU kernels (``lanes_*``) work on lane-vectorised ``ti.Vector`` fields with
-  ghost columns, visit only the rows and columns near a change (pending spans), and
-  run a whole solve in one launch with persistent workers (see the sections below
-  and ``docs/PERFORMANCE.md``).
+* the fast CPU kernels (``lanes_*``) work on lane arrays (vector ndarrays of ``LANES``
+  columns per element, :data:`~cdnf_ti.kernels.common.LANE2`) with ghost columns, visit
+  only the rows and columns near a change (pending spans), and run a whole solve in one
+  launch with persistent workers (see the sections below and ``docs/PERFORMANCE.md``).
+  They compile with explicit vector types (:func:`~cdnf_ti.taichi_runtime.vector_kernel`),
+  so their lane arithmetic runs in the host's full-width registers under both compilers;
+  hence :func:`~cdnf_ti.kernels.common.any_lane` and :func:`~cdnf_ti.kernels.common.lane_abs`
+  in place of ``.any()`` and ``ti.abs`` there.
 
 ``mode`` is a compile-time border code from :mod:`cdnf_ti.kernels.common`. The
 float64 NumPy reference of the same equations is :mod:`cdnf_ti.reference`.
@@ -17,8 +21,10 @@ float64 NumPy reference of the same equations is :mod:`cdnf_ti.reference`.
 
 import functools
 
-from ..taichi_runtime import dsl
+from ..taichi_runtime import dsl, vector_kernel
 from .common import (  # noqa: F401 - fill, lanes_fill, LANES, MAX_STEPS, MAX_WORKERS, lane_layout, sync_size: this module's interface
+    LANE2,
+    LANE3,
     LANES,
     LAST_PHASE,
     LOAD_PHASE,
@@ -26,6 +32,7 @@ from .common import (  # noqa: F401 - fill, lanes_fill, LANES, MAX_STEPS, MAX_WO
     MAX_WORKERS,
     RECORD_COEFS,
     WORKER_STRIDE,
+    any_lane,
     block_span,
     border_index,
     border_weight,
@@ -37,6 +44,8 @@ from .common import (  # noqa: F401 - fill, lanes_fill, LANES, MAX_STEPS, MAX_WO
     fill_ghosts,
     finish_rows,
     gate,
+    lane_abs,
+    lane_array,
     lane_layout,
     lane_mask,
     lane_neighbours,
@@ -275,6 +284,8 @@ def mean_activation(v: F2, theta_scale: ti.f32, blocks: ti.i32, total: D1):
 EMPTY_LO = 1 << 30  # (EMPTY_LO, EMPTY_HI): an empty span
 EMPTY_HI = -1
 SPAN = ti.types.vector(2, ti.i32)
+#: Pending spans of a field group: one :data:`SPAN` per parity and row, shape (2, H).
+SPANS = ti.types.ndarray(dtype=SPAN, ndim=2)
 
 
 @ti.func
@@ -288,8 +299,9 @@ def _visit_span(pend: ti.template(), p, i0, i1, H, E1):
     return ti.max(lo - 1, 1), ti.min(hi + 1, E1) + 1
 
 
+@vector_kernel
 @ti.kernel
-def lanes_pending_all(pend: ti.template(), W: ti.template()):
+def lanes_pending_all(pend: SPANS, W: ti.template()):
     """Every element of every row pending, both parities (after a change made outside the kernels)."""
     for p, i in pend:
         pend[p, i] = ti.Vector([1, (LANES + W - 1) // LANES])
@@ -306,12 +318,12 @@ def _start_element(x: ti.template(), p, i, e, inp, cs, W: ti.template()):
     the resting level ``cs[0]`` without evaluating the fit.
     """
     new = ti.Vector([cs[0]] * LANES, dt=ti.f32)
-    if (inp > 0.0).any():
+    if any_lane(inp > 0.0):
         new = local_start(inp, cs)
     old = x[p, i, e]
     new = ti.select(lane_mask(e, W) > 0.0, new, old)
     x[p, i, e] = new
-    return (new != old).any()
+    return any_lane(new != old)
 
 
 @ti.func
@@ -334,10 +346,10 @@ def _load_row(frame: ti.template(), L: ti.template(), P: ti.template(), scale, f
             c = ti.min((e - 1) * LANES + l, W - 1)
             g[l] = ti.cast(frame[i, c], ti.f32) * scale
         p_new = ti.select(first != 0, 0.0, g - L[i, e])
-        moved = (p_new != P[i, e]).any()
+        moved = any_lane(p_new != P[i, e])
         if local != 0:
             moved |= _start_element(u_on, pp, i, e, ti.max(p_new, 0.0), cs, W)
-            moved |= _start_element(u_off, pp, i, e, ti.max(-p_new, 0.0), cs, W)
+            moved |= _start_element(u_off, pp, i, e, ti.max(0.0 - p_new, 0.0), cs, W)
         lo = ti.select(moved, ti.min(lo, e), lo)
         hi = ti.select(moved, e, hi)
         P[i, e] = p_new
@@ -349,18 +361,20 @@ def _load_row(frame: ti.template(), L: ti.template(), P: ti.template(), scale, f
             fill_ghosts(u_off, pp, i, 1, 1, W, 1, mode)
 
 
+@vector_kernel
 @ti.kernel
-def lanes_load_frame(frame: ti.types.ndarray(ndim=2), L: ti.template(), P: ti.template(), scale: ti.f32,
-                     first: ti.i32, W: ti.template(), pend: ti.template(), pp: ti.i32, u_on: ti.template(),
-                     u_off: ti.template(), start: START, local: ti.i32, mode: ti.template()):
+def lanes_load_frame(frame: ti.types.ndarray(ndim=2), L: LANE2, P: LANE2, scale: ti.f32,
+                     first: ti.i32, W: ti.template(), pend: SPANS, pp: ti.i32, u_on: LANE3,
+                     u_off: LANE3, start: START, local: ti.i32, mode: ti.template()):
     """:func:`_load_row` for every row. The contrast solve loads a frame itself (its first
     phase); this kernel serves a frame whose fields are needed before that."""
     for i in range(L.shape[0]):
         _load_row(frame, L, P, scale, first, W, pend, pp, i, u_on, u_off, start, local, mode)
 
 
+@vector_kernel
 @ti.kernel
-def lanes_refresh_ghosts(x: ti.template(), W: ti.template(), mode: ti.template()):
+def lanes_refresh_ghosts(x: LANE3, W: ti.template(), mode: ti.template()):
     """Set the ghost columns of every row of both buffers of ``x`` from its frame columns (border mode)."""
     for p, i in ti.ndrange(2, x.shape[1]):
         fill_ghosts(x, p, i, 1, 1, W, LANES - 1, mode)
@@ -385,7 +399,7 @@ def _summation_input_row(u_on: ti.template(), u_off: ti.template(), c, S: ti.tem
         a_on = tanh_rational(ti.max(u_on[c, i, e], 0.0)) * theta_scale
         a_off = tanh_rational(ti.max(u_off[c, i, e], 0.0)) * theta_scale
         s_new = alpha_on * a_on + alpha_off * a_off
-        moved = (s_new != S[i, e]).any()
+        moved = any_lane(s_new != S[i, e])
         if local != 0:
             moved |= _start_element(v, s, i, e, s_new, cs, W)
         lo = ti.select(moved, ti.min(lo, e), lo)
@@ -398,10 +412,11 @@ def _summation_input_row(u_on: ti.template(), u_off: ti.template(), c, S: ti.tem
             fill_ghosts(v, s, i, 1, 1, W, R, mode)
 
 
+@vector_kernel
 @ti.kernel
-def lanes_summation_input(u_on: ti.template(), u_off: ti.template(), c: ti.i32, S: ti.template(),
+def lanes_summation_input(u_on: LANE3, u_off: LANE3, c: ti.i32, S: LANE2,
                           alpha_on: ti.f32, alpha_off: ti.f32, theta_scale: ti.f32, W: ti.template(),
-                          pend: ti.template(), v: ti.template(), s: ti.i32, start: START, local: ti.i32,
+                          pend: SPANS, v: LANE3, s: ti.i32, start: START, local: ti.i32,
                           mode: ti.template(), R: ti.template()):
     """``S = alpha_on theta([u_on]+) + alpha_off theta([u_off]+)`` and the Summation field's local
     start (see :func:`_summation_input_row`).
@@ -425,8 +440,9 @@ def _activation_row(v: ti.template(), s, i, theta_scale, W: ti.template()):
     return acc
 
 
+@vector_kernel
 @ti.kernel
-def lanes_mean_activation(v: ti.template(), s: ti.i32, theta_scale: ti.f32, W: ti.template(), total: D1):
+def lanes_mean_activation(v: LANE3, s: ti.i32, theta_scale: ti.f32, W: ti.template(), total: D1):
     """``total[0] += sum_xy theta([v]+)`` of buffer ``s`` over the frame columns, in float64
     (as :func:`mean_activation`: the caller zeroes it and divides by ``H W``).
 
@@ -448,7 +464,7 @@ def _relax(x: ti.template(), p, q, i, e, inp, lateral, h, lam, mom, tau, W: ti.t
     """
     xc = x[p, i, e]
     nx, d = field_update(inp, lateral, xc, x[q, i, e], h, lam, mom)
-    ad = ti.abs(d) * lane_mask(e, W)
+    ad = lane_abs(d) * lane_mask(e, W)
     x[q, i, e] = ti.select(ad > tau, nx, xc)
     moved = run_max(ad, LANES) > tau
     return ti.max(m, ad), ti.select(moved, ti.min(lo, e), lo), ti.select(moved, e, hi)
@@ -483,15 +499,16 @@ def _contrast_row(P: ti.template(), u: ti.template(), p, q, sign: ti.template(),
     return m, lo, hi
 
 
+@vector_kernel
 @ti.kernel
 def lanes_contrast_solve(
-    frame: ti.types.ndarray(ndim=2), load: ti.i32, L: ti.template(), scale: ti.f32, first: ti.i32,
-    P: ti.template(), u_on: ti.template(), u_off: ti.template(), pend: ti.template(), c: ti.i32,
+    frame: ti.types.ndarray(ndim=2), load: ti.i32, L: LANE2, scale: ti.f32, first: ti.i32,
+    P: LANE2, u_on: LANE3, u_off: LANE3, pend: SPANS, c: ti.i32,
     k0: ti.f32, k1: ti.f32, h: ti.f32, record: RECORD, n: ti.i32,
     tau: ti.f32, tol: ti.f32, grow: ti.f32, nw: ti.i32, sync: ti.template(), rbuf: ti.template(),
     W: ti.template(), mode: ti.template(),
-    S: ti.template(), pend_s: ti.template(), alpha_on: ti.f32, alpha_off: ti.f32, theta_scale: ti.f32,
-    v: ti.template(), s: ti.i32, start: START, local: ti.i32, R: ti.template(),
+    S: LANE2, pend_s: SPANS, alpha_on: ti.f32, alpha_off: ti.f32, theta_scale: ti.f32,
+    v: LANE3, s: ti.i32, start: START, local: ti.i32, R: ti.template(),
 ):
     """Up to ``n`` ON/OFF updates (:func:`field_update`) in one launch, by persistent workers.
 
@@ -587,9 +604,10 @@ def lanes_summation_kernel(g1: tuple, g2: tuple):
     G1 = tuple(float(x) for x in g1)
     G2 = tuple(float(x) for x in g2)
 
+    @vector_kernel
     @ti.kernel
     def lanes_summation_solve(
-        S: ti.template(), v: ti.template(), row1: ti.template(), row2: ti.template(), pend: ti.template(),
+        S: LANE2, v: LANE3, row1: LANE2, row2: LANE2, pend: SPANS,
         c: ti.i32, A: ti.f32, B: ti.f32, h: ti.f32, record: RECORD, n: ti.i32,
         tau: ti.f32, tol: ti.f32, grow: ti.f32, nw: ti.i32, sync: ti.template(), rbuf: ti.template(),
         W: ti.template(), mode: ti.template(), theta_scale: ti.f32, msum: ti.template(), total: D1,

@@ -294,20 +294,24 @@ def fill(x: F2, value: ti.f32):
 
 
 # ---------------------------------------------------------------------------
-# Lane-vectorised kernels on padded Vector fields (the fast path).
+# Lane-vectorised kernels on padded lane arrays (the fast path).
 #
 # Taichi 1.7 on the CPU does not loop-vectorise: every ndarray/field access in a
 # loop re-loads its base pointer after each store (the stores may alias the
 # argument buffer), so LLVM's loop vectoriser gives up and each pixel costs a
 # few scalar loads. It does SLP-vectorise straight-line code on vector-typed
-# field elements. The fast path therefore stores a field as
-# ``ti.Vector.field(LANES, f32, (H, NB))``: element (i, e) holds the LANES
+# field elements. The fast path therefore stores a field as a lane array of
+# LANES-float32 vectors, shape (H, NB): element (i, e) holds the LANES
 # consecutive columns ``(e - 1) * LANES .. e * LANES - 1`` of row i, so column
 # c lives at flat position ``LANES + c``. Element 0 and the elements past the
 # last column hold "ghost" columns: the values the border mode puts outside
 # the frame (replicate/reflect copies, or 0), refreshed by the thread that
 # wrote the row, so the stencils read neighbours without any clamping.
 # Horizontal neighbours are lane shifts of three consecutive elements.
+#
+# A lane array is a ``ti.Vector.field`` (the LGMD-family models, compiled the usual
+# way) or a vector ``ti.ndarray`` (C-DNF, whose kernels compile with explicit vector
+# types: ``taichi_runtime.vector_kernel``; the same helpers below serve both).
 #
 # The lane count suits the compiler (docs/PERFORMANCE.md, round 7): taichi 1.7.4
 # runs the C-DNF contrast update 17 % faster with 32 lanes than with 16 (Zen 3,
@@ -352,6 +356,36 @@ def lane_shift(a, b, c, s: ti.template()):
         else:
             out[l] = b[l + s]
     return out
+
+
+#: A lane array argument of an explicit-vector kernel (:func:`~cdnf_ti.taichi_runtime.vector_kernel`):
+#: a vector ndarray of ``LANES`` float32 per element, shape (H, NB) or, with its two ping-pong
+#: buffers first, (2, H, NB).
+LANE2 = ti.types.ndarray(dtype=ti.types.vector(LANES, ti.f32), ndim=2)
+LANE3 = ti.types.ndarray(dtype=ti.types.vector(LANES, ti.f32), ndim=3)
+
+
+def lane_array(*lead: int, H: int, NB: int):
+    """A zeroed lane array for explicit-vector kernels: ``LANES`` float32 per element, shape
+    ``(*lead, H, NB)`` (``lead``: ``2`` for a field's two ping-pong buffers)."""
+    return ti.ndarray(ti.types.vector(LANES, ti.f32), (*lead, H, NB))
+
+
+@ti.func
+def any_lane(mask):
+    """Whether any lane of the comparison ``mask`` (a lane vector of booleans) is set.
+
+    Not ``mask.any()``: in a kernel compiled with explicit vector types, taichi 1.7.4's
+    ``any()`` tests only some of the lanes (found in round 14; a test checks this helper).
+    """
+    return run_max(ti.select(mask, 1, 0), LANES) != 0
+
+
+@ti.func
+def lane_abs(x):
+    """``|x|`` of a lane vector (``ti.abs`` and unary minus on vectors abort taichi 1.7.4's
+    compiler with explicit vector types)."""
+    return ti.max(x, 0.0 - x)
 
 
 @ti.func

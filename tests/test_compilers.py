@@ -298,13 +298,13 @@ def test_the_simd_report_reads_only_the_solve_launches(tmp_path):
 @pytest.mark.parametrize("compiler", installed_compilers())
 def test_the_simd_report_inspects_both_solve_launches_under_each_compiler(compiler):
     from cdnf_ti.bench.simd import SOLVE_KERNELS, measure_simd, vector_share
+    from cdnf_ti.kernels.common import lane_count
 
     rows = measure_simd([compiler], size=(48, 100))
     assert [(c, label) for c, label, _ in rows] == [(compiler, label) for _, label in SOLVE_KERNELS]
-    assert all(sum(w.values()) > 100 for _, _, w in rows)  # the whole update loop, not a stub
-    if compiler == "taichi":
-        # the lane layout exists for taichi's SLP vectoriser: its update loops must come out as vector code
-        # (at least 128-bit, what taichi 1.7.4 forms on any x86-64 CPU)
-        for _, _, widths in rows:
-            assert vector_share(widths) > 0.8
-            assert max(widths, key=widths.get) >= 4
+    assert all(sum(w.values()) > 50 for _, _, w in rows)  # the whole update loop, not a stub
+    # the solves compile with explicit vector types (taichi_runtime.vector_kernel): their arithmetic stays
+    # in whole lane vectors, which the code generator lowers to the host's widest registers
+    for _, _, widths in rows:
+        assert vector_share(widths) > 0.8
+        assert max(widths, key=widths.get) == lane_count(compiler)

@@ -194,22 +194,22 @@ class _LaneWorkspace(SharedWorkspace):
 
         ti = dsl()
 
-        from ..kernels.cdnf import LANES, MAX_STEPS, SPAN, lane_layout, sync_size
+        from ..kernels.cdnf import MAX_STEPS, SPAN, lane_array, lane_layout, sync_size
         from ..kernels.common import LaunchRecord
 
         H, W = shape
         self.W = W
         self.e1, self.nb = lane_layout(W)
 
-        def vf(*lead):
-            return ti.Vector.field(LANES, ti.f32, shape=(*lead, H, self.nb))
+        def lanes(*lead):
+            return lane_array(*lead, H=H, NB=self.nb)
 
-        self.L, self.P, self.S = vf(), vf(), vf()
+        self.L, self.P, self.S = lanes(), lanes(), lanes()
         # the fields, each with its two ping-pong buffers (leading index: the parity)
-        self.u_on, self.u_off, self.v = vf(2), vf(2), vf(2)
-        self.row1, self.row2 = vf(), vf()
+        self.u_on, self.u_off, self.v = lanes(2), lanes(2), lanes(2)
+        self.row1, self.row2 = lanes(), lanes()
         # pending spans of the contrast group ("c") and the Summation field ("s"), per parity and row
-        self.pend = {g: SPAN.field(shape=(2, H)) for g in ("c", "s")}
+        self.pend = {g: ti.ndarray(SPAN, (2, H)) for g in ("c", "s")}
         self.sync = ti.field(ti.i32, sync_size())  # phase counters of the persistent workers
         self.rbuf = ti.field(ti.f32, (MAX_STEPS, 2))  # per-update residuals of a solve launch
         self.msum = ti.field(ti.f64, 2)  # sum theta([v]+) of a converged Summation solve, and its flag
@@ -225,7 +225,8 @@ class _LaneWorkspace(SharedWorkspace):
 
 
 class LaneTaichiCDNFBackend:
-    """The fast Taichi backend: fields in lane-vectorised Vector fields (float32).
+    """The fast Taichi backend: fields in lane arrays (vector ndarrays of ``LANES`` float32), kernels
+    compiled with explicit vector types (:func:`~cdnf_ti.taichi_runtime.vector_kernel`).
 
     Same interface, equations, iteration schedule and residuals as
     :class:`TaichiCDNFBackend`; the kernels are in :mod:`cdnf_ti.kernels.cdnf`
@@ -306,10 +307,10 @@ class LaneTaichiCDNFBackend:
         K = self.K
         if self._fresh:
             for a in (ws.u_on, ws.u_off):
-                K.lanes_fill(a, self.u0)
-            K.lanes_fill(ws.v, self.v0)
+                a.fill(self.u0)
+            ws.v.fill(self.v0)
             for a in (ws.L, ws.P, ws.S):
-                K.lanes_fill(a, 0.0)
+                a.fill(0.0)
             for a in (ws.u_on, ws.u_off, ws.v):
                 K.lanes_refresh_ghosts(a, self.W, self.mode)
             self.c = self.s = 0
@@ -377,7 +378,7 @@ class LaneTaichiCDNFBackend:
     def clear_input(self) -> None:
         ws = self._acquire()
         self._flush_load()
-        self.K.lanes_fill(ws.P, 0.0)
+        ws.P.fill(0.0)
         ws.all_active()
         self._s_ready, self._mean = False, None
 
