@@ -414,7 +414,9 @@ def vector_kernel(kernel):
     no ``Vector.field`` access (use vector ``ndarray`` arguments), no unary minus or
     ``ti.abs`` on a vector (``0.0 - x``, :func:`cdnf_ti.kernels.common.lane_abs`) and no
     ``.any()``/``.all()``, which taichi 1.7.4 gets wrong in this mode
-    (:func:`cdnf_ti.kernels.common.any_lane`).
+    (:func:`cdnf_ti.kernels.common.any_lane`); coefficients passed down as tuples of scalars
+    rather than small ``ti.Vector``s (a launch of quadrants 1.3.3 crashed on those,
+    ``kernels/lgmd.py``).
 
     Parameters
     ----------

@@ -22,7 +22,7 @@ float64 NumPy reference of the same equations is :mod:`cdnf_ti.reference`.
 import functools
 
 from ..taichi_runtime import dsl, vector_kernel
-from .common import (  # noqa: F401 - fill, lanes_fill, LANES, MAX_STEPS, MAX_WORKERS, lane_layout, sync_size: this module's interface
+from .common import (  # noqa: F401 - fill, LANES, MAX_STEPS, MAX_WORKERS, lane_layout, sync_size: this module's interface
     LANE2,
     LANE3,
     LANES,
@@ -50,7 +50,6 @@ from .common import (  # noqa: F401 - fill, lanes_fill, LANES, MAX_STEPS, MAX_WO
     lane_mask,
     lane_neighbours,
     lane_shift,
-    lanes_fill,
     launch_gate,
     local_start,
     luminance_change,

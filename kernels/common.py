@@ -309,9 +309,12 @@ def fill(x: F2, value: ti.f32):
 # wrote the row, so the stencils read neighbours without any clamping.
 # Horizontal neighbours are lane shifts of three consecutive elements.
 #
-# A lane array is a ``ti.Vector.field`` (the LGMD-family models, compiled the usual
-# way) or a vector ``ti.ndarray`` (C-DNF, whose kernels compile with explicit vector
-# types: ``taichi_runtime.vector_kernel``; the same helpers below serve both).
+# A lane array is a vector ``ti.ndarray`` (:func:`lane_array`), and the kernels that
+# work on lane arrays (C-DNF's and the LGMD family's ``lanes_*``) compile with explicit
+# vector types (``taichi_runtime.vector_kernel``): a lane vector stays one LLVM vector,
+# which the code generator lowers to the host's widest registers, under both compilers
+# (docs/PERFORMANCE.md, round 14). The helpers below also serve the row runs of the
+# generic kernels, which compile the usual (scalarised) way.
 #
 # The lane count suits the compiler (docs/PERFORMANCE.md, round 7): taichi 1.7.4
 # runs the C-DNF contrast update 17 % faster with 32 lanes than with 16 (Zen 3,
@@ -470,13 +473,6 @@ def lane_neighbours(left, b, right):
         lo[l] = b[l - 1]
         hi[l - 1] = b[l]
     return lo, hi
-
-
-@ti.kernel
-def lanes_fill(x: ti.template(), value: ti.f32):
-    """Every lane of every element (ghosts included) = ``value``."""
-    for I in ti.grouped(x):
-        x[I] = ti.Vector([value] * LANES, dt=ti.f32)
 
 
 MAX_STEPS = 16  # updates per launch of the solve kernels (steps_per_launch <= 16)

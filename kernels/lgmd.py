@@ -21,10 +21,12 @@ their own fields and copy the results into ``out`` in their serial tail.
 The NumPy float64 oracle of every stage is :mod:`cdnf_ti.baselines_reference`.
 """
 
-from ..taichi_runtime import dsl
+from ..taichi_runtime import dsl, vector_kernel
 
-# fill, lanes_fill, LANES, MAX_STEPS, MAX_WORKERS and sync_size are part of this module's interface
+# fill, LANES, MAX_STEPS, MAX_WORKERS and sync_size are part of this module's interface
 from .common import (  # noqa: F401
+    LANE2,
+    LANE3,
     LANES,
     MAX_STEPS,
     MAX_WORKERS,
@@ -37,9 +39,9 @@ from .common import (  # noqa: F401
     fill_ghosts,
     finish_rows,
     gate,
+    lane_abs,
     lane_edge_diag,
     lane_mask,
-    lanes_fill,
     luminance_change,
     record_residuals,
     reset_sync,
@@ -55,6 +57,7 @@ from .common import (  # noqa: F401
 
 ti = dsl()  # taichi or quadrants: the same DSL
 
+
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 D1 = ti.types.ndarray(dtype=ti.f64, ndim=1)  # a launch's results ``out``, set by the caller before it
 
@@ -63,7 +66,7 @@ D1 = ti.types.ndarray(dtype=ti.f64, ndim=1)  # a launch's results ``out``, set b
 def half_wave(p, on_prev, off_prev, clip, dc):
     """ON/OFF channels with residue (scalars or vectors):
     ``ON = P [P >= clip] + dc ON(t-1)``, ``OFF = |P| [P < clip] + dc OFF(t-1)``."""
-    return ti.select(p >= clip, p, 0.0) + dc * on_prev, ti.select(p < clip, ti.abs(p), 0.0) + dc * off_prev
+    return ti.select(p >= clip, p, 0.0) + dc * on_prev, ti.select(p < clip, lane_abs(p), 0.0) + dc * off_prev
 
 
 @ti.func
@@ -437,7 +440,7 @@ def flgmd_finish(
 
 # -- F-LGMD on lane fields (the fast CPU path) ------------------------------------------
 # The same equations (half_wave, feedback_local, feedback_update, summed_layer) on
-# lane-vectorised Vector fields with ghost columns (see kernels/common.py): element
+# lane arrays with ghost columns (vector ndarrays, see kernels/common.py): element
 # (i, e) holds the LANES columns (e - 1) * LANES .. e * LANES - 1 of row i, elements
 # 1..E1 hold the frame, the replicate border sits in the ghost columns -1 and W.
 # The channels have three buffers (leading index): the settled channel of the last
@@ -463,12 +466,13 @@ def _lane_grey(frame: ti.template(), i, e, scale, W: ti.template()):
     return ti.floor(g * scale + 0.5)
 
 
+@vector_kernel
 @ti.kernel
 def lgmd_lanes_load(
-    frame: ti.types.ndarray(ndim=2), L: ti.template(), P: ti.template(), on: ti.template(), off: ti.template(),
+    frame: ti.types.ndarray(ndim=2), L: LANE2, P: LANE2, on: LANE3, off: LANE3,
     c_on: ti.i32, s_on: ti.i32, c_off: ti.i32, s_off: ti.i32, scale: ti.f32, first: ti.i32, clip: ti.f32,
-    dc: ti.f32, W: ti.template(), blocks: ti.i32, feedback: ti.template(), on0: ti.template(),
-    off0: ti.template(), q_on: ti.template(), q_off: ti.template(), qn1: ti.f32, qn2: ti.f32, qf1: ti.f32,
+    dc: ti.f32, W: ti.template(), blocks: ti.i32, feedback: ti.template(), on0: LANE2,
+    off0: LANE2, q_on: LANE2, q_off: LANE2, qn1: ti.f32, qn2: ti.f32, qf1: ti.f32,
     qf2: ti.f32, wn: ti.f32, kn: ti.f32, wf: ti.f32, kf: ti.f32, out: D1,
 ):
     """:func:`load_frame` on lane fields: photoreceptors ``L``/``P`` and the ON/OFF channels,
@@ -508,7 +512,7 @@ def lgmd_lanes_load(
                 b = feedback_start(b, qf, wf, kf)
             on[s_on, i, e] = a
             off[s_off, i, e] = b
-            acc += ti.cast((ti.abs(p) * lane_mask(e, W)).sum(), ti.f64)
+            acc += ti.cast((lane_abs(p) * lane_mask(e, W)).sum(), ti.f64)
         fill_ghosts(on, s_on, i, e0 == 1, e1 == E1 + 1, W, 1, REPLICATE)
         fill_ghosts(off, s_off, i, e0 == 1, e1 == E1 + 1, W, 1, REPLICATE)
         ti.atomic_add(out[0], acc)
@@ -522,7 +526,7 @@ def _lane_relax(x0: ti.template(), x: ti.template(), q: ti.template(), p, n, im,
     c, ed, dg = lane_edge_diag(x, p, im, i, ip, e)
     new, d = feedback_update(x0[i, e], c, feedback_local(c, ed, dg, w, q[i, e]), x[n, i, e], beta, lam, mom)
     x[n, i, e] = new
-    return ti.abs(d) * lane_mask(e, W)
+    return lane_abs(d) * lane_mask(e, W)
 
 
 # -- F-LGMD: a whole solve in one launch ----------------------------------------------
@@ -587,7 +591,7 @@ def _lane_box_row(S: ti.template(), out: ti.template(), i, H, W: ti.template(), 
         out[i, e] = b
         v = b * lane_mask(e, W)
         if ti.static(reduce == "max"):
-            acc = ti.max(acc, ti.cast(run_max(ti.abs(v), LANES), ti.f64))
+            acc = ti.max(acc, ti.cast(run_max(lane_abs(v), LANES), ti.f64))
         else:
             acc += ti.cast(v.sum(), ti.f64)
     return acc
@@ -609,10 +613,11 @@ def _lane_group_phase(S: ti.template(), G: ti.template(), msum: ti.template(), s
         finish_rows(sync, phase, i1 - i0)
 
 
+@vector_kernel
 @ti.kernel
 def flgmd_lanes_solve(
-    on0: ti.template(), off0: ti.template(), on: ti.template(), off: ti.template(), q_on: ti.template(),
-    q_off: ti.template(), S_on: ti.template(), S_off: ti.template(), S: ti.template(), G: ti.template(),
+    on0: LANE2, off0: LANE2, on: LANE3, off: LANE3, q_on: LANE2,
+    q_off: LANE2, S_on: LANE2, S_off: LANE2, S: LANE2, G: LANE2,
     p_on: ti.i32, n_on: ti.i32, p_off: ti.i32, n_off: ti.i32,
     wn0: ti.f32, wn1: ti.f32, wn2: ti.f32, wf0: ti.f32, wf1: ti.f32, wf2: ti.f32,
     beta_on: ti.f32, beta_off: ti.f32, t_s: ti.f32, record: ti.types.ndarray(dtype=ti.f32, ndim=2), n: ti.i32,
@@ -687,10 +692,11 @@ def flgmd_lanes_solve(
         out[0] = msum[0]
 
 
+@vector_kernel
 @ti.kernel
 def flgmd_lanes_finish(
-    on: ti.template(), off: ti.template(), f_on: ti.i32, f_off: ti.i32, q_on: ti.template(), q_off: ti.template(),
-    S_on: ti.template(), S_off: ti.template(), S: ti.template(), G: ti.template(),
+    on: LANE3, off: LANE3, f_on: ti.i32, f_off: ti.i32, q_on: LANE2, q_off: LANE2,
+    S_on: LANE2, S_off: LANE2, S: LANE2, G: LANE2,
     wn0: ti.f32, wn1: ti.f32, wn2: ti.f32, wf0: ti.f32, wf1: ti.f32, wf2: ti.f32, t_s: ti.f32, W: ti.template(),
     out: D1,
 ):
@@ -712,11 +718,15 @@ def flgmd_lanes_finish(
 # -- LGMD1 and LGMD2 on lane fields: the layers of a frame in one launch -------------------
 # Phase 0: the delayed layers and S (:func:`_lane_delayed_phase`); then LGMD2: phase 1, Ce and
 # max |Ce|; phase 2, G and sum G. LGMD1: phase 1, G and sum G (:func:`_lane_group_phase`, as F-LGMD).
+# The stencil coefficients travel as tuples of scalars (template arguments), not as small
+# ti.Vectors: with explicit vector types quadrants 1.3.3 compiled those into a launch that
+# crashed (segmentation fault in delayed_mix's coefficients, round 14).
 
 
 @ti.func
 def _lane_delayed_row(on: ti.template(), off: ti.template(), c, q, X_on: ti.template(), X_off: ti.template(),
-                      S: ti.template(), i, H, kn, an, kf, af, model: ti.template(), sp, e3, W: ti.template()):
+                      S: ti.template(), i, H, kn: ti.template(), an: ti.template(), kf: ti.template(),
+                      af: ti.template(), model: ti.template(), sp: ti.template(), e3: ti.template(), W: ti.template()):
     """Row ``i`` of the delayed layers ``X_on``/``X_off`` (:func:`delayed_mix` of ON/OFF: buffer ``c``
     now, ``q`` the frame before) and of ``S``: :func:`lgmd1_summation` (``model == "lgmd1"``;
     ``sp = (w_i_on, w_i_off, t_s)``) or :func:`lgmd2_summation` (``sp = (w_on, w_off, -)``)."""
@@ -741,7 +751,8 @@ def _lane_delayed_row(on: ti.template(), off: ti.template(), c, q, X_on: ti.temp
 
 @ti.func
 def _lane_delayed_phase(on: ti.template(), off: ti.template(), c, q, X_on: ti.template(), X_off: ti.template(),
-                        S: ti.template(), kn, an, kf, af, model: ti.template(), sp, e3, sync: ti.template(), phase,
+                        S: ti.template(), kn: ti.template(), an: ti.template(), kf: ti.template(), af: ti.template(),
+                        model: ti.template(), sp: ti.template(), e3: ti.template(), sync: ti.template(), phase,
                         w, nw, H, W: ti.template()):
     """Worker ``w``'s part of ``phase``: :func:`_lane_delayed_row` on each row it claims."""
     while True:
@@ -753,10 +764,11 @@ def _lane_delayed_phase(on: ti.template(), off: ti.template(), c, q, X_on: ti.te
         finish_rows(sync, phase, i1 - i0)
 
 
+@vector_kernel
 @ti.kernel
 def lgmd2_lanes_layers(
-    on: ti.template(), off: ti.template(), c: ti.i32, q: ti.i32, I_on: ti.template(), I_off: ti.template(),
-    S: ti.template(), Ce: ti.template(), G: ti.template(), w_on: ti.f32, w_off: ti.f32,
+    on: LANE3, off: LANE3, c: ti.i32, q: ti.i32, I_on: LANE2, I_off: LANE2,
+    S: LANE2, Ce: LANE2, G: LANE2, w_on: ti.f32, w_off: ti.f32,
     kn0: ti.f32, kn1: ti.f32, kn2: ti.f32, an0: ti.f32, an1: ti.f32, an2: ti.f32,
     kf0: ti.f32, kf1: ti.f32, kf2: ti.f32, af0: ti.f32, af1: ti.f32, af2: ti.f32,
     e_on: ti.f32, e_off: ti.f32, e_onoff: ti.f32, delta_c: ti.f32, c_w: ti.f32, c_de: ti.f32, t_de: ti.f32,
@@ -768,12 +780,12 @@ def lgmd2_lanes_layers(
     Writes ``out[0] = sum G``, ``out[1] = max |Ce|`` in its serial tail.
     """
     H = S.shape[0]
-    kn = ti.Vector([kn0, kn1, kn2])
-    an = ti.Vector([an0, an1, an2])
-    kf = ti.Vector([kf0, kf1, kf2])
-    af = ti.Vector([af0, af1, af2])
-    e3 = ti.Vector([e_on, e_off, e_onoff])
-    sp = ti.Vector([w_on, w_off, 0.0])
+    kn = (kn0, kn1, kn2)
+    an = (an0, an1, an2)
+    kf = (kf0, kf1, kf2)
+    af = (af0, af1, af2)
+    e3 = (e_on, e_off, e_onoff)
+    sp = (w_on, w_off, 0.0)
     reset_sync(sync, rbuf, nw)
     msum[0] = 0.0
     for slot in range(nw * WORKER_STRIDE):
@@ -809,10 +821,11 @@ def lgmd2_lanes_layers(
     out[1] = ti.cast(ti.max(rbuf[0, 0], 0.0), ti.f64)
 
 
+@vector_kernel
 @ti.kernel
 def lgmd1_lanes_layers(
-    on: ti.template(), off: ti.template(), c: ti.i32, q: ti.i32, I_on: ti.template(), E_off: ti.template(),
-    S: ti.template(), G: ti.template(), w_i_on: ti.f32, w_i_off: ti.f32, k1: ti.f32, k2: ti.f32, a1: ti.f32,
+    on: LANE3, off: LANE3, c: ti.i32, q: ti.i32, I_on: LANE2, E_off: LANE2,
+    S: LANE2, G: LANE2, w_i_on: ti.f32, w_i_off: ti.f32, k1: ti.f32, k2: ti.f32, a1: ti.f32,
     a2: ti.f32, e_on: ti.f32, e_off: ti.f32, e_onoff: ti.f32, t_s: ti.f32,
     nw: ti.i32, sync: ti.template(), rbuf: ti.template(), msum: ti.template(), W: ti.template(), out: D1,
 ):
@@ -822,10 +835,10 @@ def lgmd1_lanes_layers(
     Writes ``out[0] = sum G`` in its serial tail.
     """
     H = S.shape[0]
-    k = ti.Vector([0.0, k1, k2])  # centre 0
-    a = ti.Vector([0.0, a1, a2])
-    e3 = ti.Vector([e_on, e_off, e_onoff])
-    sp = ti.Vector([w_i_on, w_i_off, t_s])
+    k = (0.0, k1, k2)  # centre 0
+    a = (0.0, a1, a2)
+    e3 = (e_on, e_off, e_onoff)
+    sp = (w_i_on, w_i_off, t_s)
     reset_sync(sync, rbuf, nw)
     msum[0] = 0.0
     for slot in range(nw * WORKER_STRIDE):

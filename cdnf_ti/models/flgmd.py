@@ -294,7 +294,7 @@ class _FLGMDLanes(LGMDLanes):
 
 
 class LaneTaichiFLGMDBackend(LaneTaichiLGMDBackend):
-    """The fast F-LGMD backend on the CPU: the layers in lane-vectorised Vector fields (float32).
+    """The fast F-LGMD backend on the CPU: the layers in lane arrays (float32 vector ndarrays).
 
     Same interface, equations, iteration schedule and residuals as
     :class:`TaichiFLGMDBackend`; the kernels are :func:`~cdnf_ti.kernels.lgmd.lgmd_lanes_load`

@@ -278,7 +278,8 @@ class TaichiLGMD2Backend(TaichiLGMDBackend):
 class LGMDLanes(SharedWorkspace):
     """The lane fields of an LGMD-family model for one frame size (:class:`LaneTaichiLGMDBackend`).
 
-    Every layer in :attr:`LAYERS` is a ``ti.Vector.field(LANES, f32, (H, NB))`` in the lane
+    Every layer in :attr:`LAYERS` is a lane array (a vector ndarray, ``LANES`` float32 per element,
+    shape (H, NB); :func:`~cdnf_ti.kernels.common.lane_array`) in the lane
     layout of :mod:`cdnf_ti.kernels.common`; the channels ``on``/``off`` have
     :attr:`CHANNEL_BUFFERS` buffers (leading index). Each model has its own subclass, so its
     fields (and compiled kernels) are shared by the models of that kind and size only.
@@ -289,21 +290,22 @@ class LGMDLanes(SharedWorkspace):
 
     def __init__(self, shape: tuple[int, int]):
         super().__init__(shape)
-        from ..kernels.common import LANES, MAX_STEPS, lane_layout, sync_size
+        from ..kernels.common import MAX_STEPS, lane_array, lane_layout, sync_size
 
         ti = dsl()
         H, W = shape
         _, nb = lane_layout(W)
         for name in self.LAYERS:
             lead = (self.CHANNEL_BUFFERS,) if name in ("on", "off") else ()
-            setattr(self, name, ti.Vector.field(LANES, ti.f32, shape=(*lead, H, nb)))
+            setattr(self, name, lane_array(*lead, H=H, NB=nb))
         self.sync = ti.field(ti.i32, sync_size())  # phase counters of the persistent workers
         self.rbuf = ti.field(ti.f32, (MAX_STEPS, 2))  # per-phase maxima (residuals, max |Ce|)
         self.msum = ti.field(ti.f64, 2)  # a launch's float64 sum, and a flag
 
 
 class LaneTaichiLGMDBackend:
-    """The fast CPU backend of an LGMD-family model: its layers in lane-vectorised Vector fields.
+    """The fast CPU backend of an LGMD-family model: its layers in lane arrays, kernels compiled with
+    explicit vector types (:func:`~cdnf_ti.taichi_runtime.vector_kernel`).
 
     Same interface, equations and results as the model's ndarray backend
     (:class:`TaichiLGMDBackend`); the kernels are the ``lanes_*`` ones of
@@ -373,7 +375,7 @@ class LaneTaichiLGMDBackend:
     def reset(self) -> None:
         ws = self._acquire()
         for name in ws.LAYERS:
-            self.K.lanes_fill(getattr(ws, name), 0.0)
+            getattr(ws, name).fill(0.0)
         self._reset_buffers()
 
     def _reset_buffers(self) -> None:
