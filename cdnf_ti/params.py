@@ -143,7 +143,7 @@ class CDNFParams(ModelParams):
         rule): Chebyshev semi-iteration with bounds from the kernels' spectra (default,
         2-3x fewer iterations) or the paper's plain (damped) iteration.
     steps_per_launch : int
-        Updates per kernel launch, 1..16 (the residual of each is returned; a launch
+        Updates per kernel launch, 1..32 (the residual of each is returned; a launch
         stops updating once every field is within ``tol``, or when the residual grows).
     contrast_bounds, summation_bounds : (float, float) or None
         Spectral bounds ``[a, b]`` of the maps' Jacobians for the Chebyshev scheme;
@@ -180,7 +180,7 @@ class CDNFParams(ModelParams):
     min_damping: float = 1.0 / 64.0
     stall_patience: int = 4
     scheme: str = "chebyshev"
-    steps_per_launch: int = 16
+    steps_per_launch: int = 32
     contrast_bounds: tuple[float, float] | None = None
     summation_bounds: tuple[float, float] | None = None
     start: str = "local"
@@ -212,8 +212,8 @@ class CDNFParams(ModelParams):
              f"radius_s must be a positive integer, got {self.radius_s}"),
             (self.scheme in ("chebyshev", "plain"),
              f"scheme must be 'chebyshev' or 'plain', got {self.scheme!r}"),
-            (int(self.steps_per_launch) == self.steps_per_launch and 1 <= self.steps_per_launch <= 16,
-             f"steps_per_launch must be an integer in 1..16, got {self.steps_per_launch}"),
+            (int(self.steps_per_launch) == self.steps_per_launch and 1 <= self.steps_per_launch <= 32,
+             f"steps_per_launch must be an integer in 1..32, got {self.steps_per_launch}"),
             (_bounds_ok(self.contrast_bounds), f"contrast_bounds must be (a, b) with a <= b < 1, "
                                                f"got {self.contrast_bounds}"),
             (_bounds_ok(self.summation_bounds), f"summation_bounds must be (a, b) with a <= b < 1, "

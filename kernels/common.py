@@ -475,7 +475,8 @@ def lane_neighbours(left, b, right):
     return lo, hi
 
 
-MAX_STEPS = 16  # updates per launch of the solve kernels (steps_per_launch <= 16)
+MAX_STEPS = 32  # updates per launch of the solve kernels (steps_per_launch <= 32): the plain scheme's ~25
+# Summation updates of a frame fit one launch, one late-waking pool thread less per frame (round 14)
 
 # -- launch records --------------------------------------------------------------------
 # A solve kernel runs up to MAX_STEPS updates of a fixed point in one launch. Its

@@ -67,7 +67,7 @@ def test_threshold_is_half_plus_epsilon():
         ({"sigma_c": 0.0}, "sigma_c"),
         ({"sigma_1": -1.0}, "sigma_1"),
         ({"steps_per_launch": 0}, "steps_per_launch"),
-        ({"steps_per_launch": 17}, "steps_per_launch"),
+        ({"steps_per_launch": 33}, "steps_per_launch"),
         ({"sigma_2": 0.0}, "sigma_2"),
         ({"max_iter": 0}, "max_iter"),
         ({"damping": 0.0}, "damping"),
