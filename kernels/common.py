@@ -316,14 +316,15 @@ def fill(x: F2, value: ti.f32):
 # (docs/PERFORMANCE.md, round 14). The helpers below also serve the row runs of the
 # generic kernels, which compile the usual (scalarised) way.
 #
-# The lane count suits the compiler (docs/PERFORMANCE.md, round 7): taichi 1.7.4
-# runs the C-DNF contrast update 17 % faster with 32 lanes than with 16 (Zen 3,
-# AVX2), quadrants 1.3.3 runs C-DNF 22 % slower with 32; both ran slower with 8.
-# $CDNF_TI_LANES overrides it, to measure and tune the layout on another CPU.
+# The lane count suits the compiler, and is 32 for both now: with explicit vector types
+# every lane model ran faster at 32 lanes than at 16 under quadrants on the Zen 5 host
+# (C-DNF 1.3-1.5x, LGMD1/LGMD2/F-LGMD 10-28 % at 426x240; docs/PERFORMANCE.md, round 14),
+# and taichi's contrast update 1.6x faster; scalarised (rounds 7-13) quadrants had
+# preferred 16. $CDNF_TI_LANES overrides it, to measure and tune the layout on another CPU.
 # ---------------------------------------------------------------------------
 
 #: Lanes per vector element of the fast path, per compiler.
-LANES_BY_COMPILER = {"taichi": 32, "quadrants": 16}
+LANES_BY_COMPILER = {"taichi": 32, "quadrants": 32}
 
 
 def lane_count(compiler: str) -> int:

@@ -218,7 +218,7 @@ def test_another_taichi_program_with_a_small_cache_evicts_none_of_cdnf_tis_kerne
 
 @pytest.mark.parametrize("compiler", installed_compilers())
 def test_the_lane_width_of_the_fast_path_suits_the_compiler(compiler):
-    # taichi runs the lane kernels fastest with 32 lanes, quadrants with 16 (docs/PERFORMANCE.md, round 7)
+    # both compilers run the lane kernels fastest with 32 lanes (docs/PERFORMANCE.md, round 14)
     code = ("from cdnf_ti.taichi_runtime import ensure_taichi\nensure_taichi('cpu')\n"
             "from cdnf_ti.kernels import cdnf, common, lgmd\nprint(common.LANES, cdnf.LANES, lgmd.LANES)")
     env = dict(os.environ, **{COMPILER_ENV: compiler})
@@ -226,7 +226,7 @@ def test_the_lane_width_of_the_fast_path_suits_the_compiler(compiler):
     proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    want = {"taichi": 32, "quadrants": 16}[compiler]
+    want = {"taichi": 32, "quadrants": 32}[compiler]
     assert proc.stdout.split()[-3:] == [str(want)] * 3
 
 
@@ -306,5 +306,6 @@ def test_the_simd_report_inspects_both_solve_launches_under_each_compiler(compil
     # the solves compile with explicit vector types (taichi_runtime.vector_kernel): their arithmetic stays
     # in whole lane vectors, which the code generator lowers to the host's widest registers
     for _, _, widths in rows:
-        assert vector_share(widths) > 0.8
         assert max(widths, key=widths.get) == lane_count(compiler)
+        lanes_done = {w: w * n for w, n in widths.items()}  # float operations, each lane counted
+        assert vector_share(lanes_done) > 0.95  # the scalar rest: per-row bookkeeping
