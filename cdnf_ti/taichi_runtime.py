@@ -3,9 +3,9 @@
 cdnf_ti's kernels are written in the Taichi DSL and compile under either
 
 * ``taichi`` 1.7 (upstream; LLVM 15; wheels up to Python 3.12), the default where it is
-  installed: with the lane-vectorised layout of :mod:`cdnf_ti.kernels.cdnf` it measured
-  about 3x less CPU time per frame than quadrants on the project's Zen 5 machines
-  (``docs/PERFORMANCE.md``), or
+  installed: with the lane kernels compiled with explicit vector types (:func:`vector_kernel`)
+  it runs C-DNF about as fast as quadrants at 426x240 and faster at 600x600 on the project's
+  Zen 5 machines, and starts 3 s sooner (``docs/PERFORMANCE.md``, round 14), or
 * ``quadrants`` (``import quadrants as qd``; the maintained fork, LLVM 22, wheels for
   Python 3.10-3.13+), the default where taichi has no wheel (Python 3.13).
 
