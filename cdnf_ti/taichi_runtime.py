@@ -403,7 +403,8 @@ def vector_kernel(kernel):
 
     Returns a function that launches ``kernel`` with the same arguments. The first launch
     with a new compile signature (the values of its ``ti.template()`` arguments, the type,
-    dtype and ndim of its array arguments: what makes the compiler build another instance)
+    dtype and ndim of the array arguments whose annotation leaves those open: what makes the
+    compiler build another instance)
     runs with the option off, under a lock, and restores it: that launch compiles the
     instance. Every other launch is a plain call, the option untouched. So only these
     kernels compile in that mode; the option is off only while one of their instances is
@@ -435,13 +436,15 @@ def vector_kernel(kernel):
     template = type(ti.template())
     ndarray = type(ti.types.ndarray())
     templates = tuple(k for k, p in enumerate(params) if isinstance(p.annotation, template))
-    arrays = tuple(k for k, p in enumerate(params) if isinstance(p.annotation, ndarray))
+    # arrays whose annotation leaves the dtype or ndim open (a frame: uint8 or float); the others
+    # cannot make another instance
+    open_arrays = tuple(k for k, p in enumerate(params) if isinstance(p.annotation, ndarray)
+                        and (p.annotation.dtype is None or p.annotation.ndim is None))
     compiled: set[tuple] = set()
 
     def signature(args: tuple) -> tuple:
-        key = [args[k] if isinstance(args[k], (int, str)) else id(args[k]) for k in templates]
-        key += [(type(args[k]), str(args[k].dtype), len(args[k].shape)) for k in arrays]
-        return tuple(key)
+        return (tuple(args[k] if isinstance(args[k], (int, str)) else id(args[k]) for k in templates),
+                tuple((type(args[k]), args[k].dtype, len(args[k].shape)) for k in open_arrays))
 
     @functools.wraps(kernel)
     def launch(*args):

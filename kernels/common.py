@@ -370,7 +370,7 @@ LANE3 = ti.types.ndarray(dtype=ti.types.vector(LANES, ti.f32), ndim=3)
 
 
 def lane_array(*lead: int, H: int, NB: int):
-    """A zeroed lane array for explicit-vector kernels: ``LANES`` float32 per element, shape
+    """A lane array for explicit-vector kernels: ``LANES`` float32 per element, shape
     ``(*lead, H, NB)`` (``lead``: ``2`` for a field's two ping-pong buffers)."""
     return ti.ndarray(ti.types.vector(LANES, ti.f32), (*lead, H, NB))
 

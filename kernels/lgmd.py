@@ -57,7 +57,6 @@ from .common import (  # noqa: F401
 
 ti = dsl()  # taichi or quadrants: the same DSL
 
-
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 D1 = ti.types.ndarray(dtype=ti.f64, ndim=1)  # a launch's results ``out``, set by the caller before it
 

@@ -291,7 +291,8 @@ def test_the_simd_report_reads_only_the_solve_launches(tmp_path):
     from cdnf_ti.bench.simd import kernel_widths
 
     (tmp_path / "x_kernel_cpu_llvm_ir_optimized_0000.ll").write_text(_IR)
-    (tmp_path / "x_kernel_cpu_llvm_ir_optimized_0001.ll").write_text(_IR.replace("lanes_contrast_solve", "lanes_fill"))
+    other = _IR.replace("lanes_contrast_solve", "lanes_load_frame")  # a launch that is not a solve
+    (tmp_path / "x_kernel_cpu_llvm_ir_optimized_0001.ll").write_text(other)
     assert kernel_widths(str(tmp_path)) == {"ON/OFF contrast solve": {1: 2, 8: 2, 4: 1}}
 
 
