@@ -192,9 +192,10 @@ def output_lock(folder: str | os.PathLike, wait: bool = True,
 
     A second run into the same folder waits until the first one finishes
     (``wait=True``; it then reuses the finished results) or fails at once with
-    an :class:`OutputError` (``wait=False``). The lock is released when the
-    process ends, however it ends. On systems without ``fcntl`` (Windows) it
-    does nothing.
+    an :class:`OutputError` (``wait=False``). The lock file is removed when the
+    run ends, and the lock is released when the process ends, however it ends
+    (a killed run leaves the file, unlocked: the next run takes it). On systems
+    without ``fcntl`` (Windows) it does nothing.
 
     Parameters
     ----------
@@ -209,24 +210,45 @@ def output_lock(folder: str | os.PathLike, wait: bool = True,
         yield
         return
     lock = Path(folder) / LOCK_NAME
-    try:
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
-    except OSError as e:
-        raise output_error(lock, e) from None
-    try:
+    while True:
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.pread(fd, 64, 0).decode("ascii", "replace").strip() or "?"
-            msg = f"{folder}: another cdnf_ti run (pid {holder}) is writing to this folder"
-            if not wait:
-                raise OutputError(folder, f"another cdnf_ti run (pid {holder}) is writing to this folder; "
-                                          "wait for it or give another --out") from None
-            (notify or (lambda m: print(m, file=sys.stderr, flush=True)))(
-                f"note: {msg}; waiting for it to finish (its finished work will be reused)")
-            fcntl.flock(fd, fcntl.LOCK_EX)
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
+        except OSError as e:
+            raise output_error(lock, e) from None
+        try:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = os.pread(fd, 64, 0).decode("ascii", "replace").strip() or "?"
+                msg = f"{folder}: another cdnf_ti run (pid {holder}) is writing to this folder"
+                if not wait:
+                    raise OutputError(folder, f"another cdnf_ti run (pid {holder}) is writing to this folder; "
+                                              "wait for it or give another --out") from None
+                (notify or (lambda m: print(m, file=sys.stderr, flush=True)))(
+                    f"note: {msg}; waiting for it to finish (its finished work will be reused)")
+                fcntl.flock(fd, fcntl.LOCK_EX)
+        except BaseException:
+            os.close(fd)
+            raise
+        if _same_file(fd, lock):
+            break
+        os.close(fd)  # the holder removed the file as it finished: lock the one that is there now
+    try:
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
         yield
     finally:
+        try:
+            os.unlink(lock)  # removed while still held: a run waiting on it locks a fresh file
+        except OSError:
+            pass
         os.close(fd)  # closing the descriptor releases the lock
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    """Whether the open descriptor ``fd`` is the file now at ``path``."""
+    try:
+        a, b = os.fstat(fd), os.stat(path)
+    except OSError:
+        return False
+    return (a.st_dev, a.st_ino) == (b.st_dev, b.st_ino)

@@ -110,18 +110,23 @@ def run_videos(argv: Sequence[str]) -> int:
             params = CDNFParams(epsilon=args.epsilon)
         except ValueError as e:
             raise UserError(f"--epsilon: {e}") from None
+    existed = Path(args.out).expanduser().exists()
     out = prepare_output(args.out)  # before any work
     with output_lock(out):
-        return _run_videos(args, models, params, Path(args.out), atomic_write_text)
+        code = _run_videos(args, models, params, Path(args.out), atomic_write_text)
+    if not existed:
+        try:
+            out.rmdir()  # a folder made for this run that got nothing: left as it was (absent)
+        except OSError:
+            pass
+    return code
 
 
 def _run_videos(args, models: list[str], params, out: Path, write_text) -> int:
     rain_params = None
     if args.rain:
         rain_params = RainParams(drops=args.rain_drops)
-    columns = ["clip", "model", "frames", "first_alert", "max_output", "fps", "status"]
-    if args.rain:
-        columns.append("rain_snr_db")
+    condition = "rain" if args.rain else "clean"
     summary: list[dict] = []  # rows in input order ("_i": index of the input)
     sources: list = []
     order: list[int] = []
@@ -136,8 +141,8 @@ def _run_videos(args, models: list[str], params, out: Path, write_text) -> int:
         except UserError as e:
             print(f"error: {e}", file=sys.stderr)
             problem = e.problem if isinstance(e, InputError) else str(e)
-            summary.append({"_i": index, "clip": Path(str(path)).stem, "model": ",".join(models),
-                            "status": f"error: {problem}"})
+            summary.append({"_i": index, "input": str(path), "clip": Path(str(path)).stem,
+                            "model": ",".join(models), "condition": condition, "status": f"error: {problem}"})
     if not sources:  # nothing could be opened: leave the output folder (and a summary of an earlier run) as it was
         return EXIT_USAGE
     names = unique_names([str(p) for p, _ in sources], [src.name for _, src in sources])
@@ -163,17 +168,19 @@ def _run_videos(args, models: list[str], params, out: Path, write_text) -> int:
                                     progress=False if args.no_progress else f"{clip} [{', '.join(models)}]")
         except InputError as e:
             print(f"error: {e}", file=sys.stderr)
-            summary.append({"_i": index, "clip": clip, "model": ",".join(models), "status": f"error: {e.problem}"})
+            summary.append({"_i": index, "input": str(path), "clip": clip, "model": ",".join(models),
+                            "condition": condition, "status": f"error: {e.problem}"})
             continue
         for name, trace, err in zip(models, traces, errors):
             if err is not None:
                 msg = str(err) if isinstance(err, UserError) else f"{type(err).__name__}: {err}"
                 print(f"error: {path} [{name}]: {msg}".splitlines()[0], file=sys.stderr)
-                summary.append({"_i": index, "clip": clip, "model": name,
-                                "status": f"error: {msg}".splitlines()[0]})
+                summary.append({"_i": index, "input": str(path), "clip": clip, "model": name,
+                                "condition": condition, "status": f"error: {msg}".splitlines()[0]})
                 continue
             ran += 1
-            trace.to_csv(out / f"{clip}.{name}.csv")
+            trace_name = trace_file_name(clip, name, condition)
+            trace.to_csv(out / trace_name)
             fa = trace.first_alert
             fa_txt = f"{fa} ({fa / src.fps:.2f} s)" if fa is not None else "none"
             unconv = int((~trace.converged).sum())
@@ -185,20 +192,96 @@ def _run_videos(args, models: list[str], params, out: Path, write_text) -> int:
             out_name = "" if clip == src.name else f" -> {clip}"
             print(f"{path}{out_name} [{name}]: {trace.n_frames} frames, first alert {fa_txt}, "
                   f"max {trace.output_name} {trace.output.max():.4f}, {fps_txt}{note}")
-            summary.append({"_i": index, "clip": clip, "model": name, "frames": trace.n_frames,
+            summary.append({"_i": index, "input": str(path), "clip": clip, "model": name, "condition": condition,
+                            "params": params_text(instances[models.index(name)]), "trace": trace_name,
+                            "frames": trace.n_frames, "video_fps": f"{src.fps:g}",
                             "first_alert": "" if fa is None else fa, "max_output": f"{trace.output.max():.6f}",
-                            "fps": f"{fps:.2f}" if math.isfinite(fps) else "",
+                            "proc_fps": f"{fps:.2f}" if math.isfinite(fps) else "",
                             "status": "ok" if not unconv else "unconverged",
                             "rain_snr_db": f"{rain.snr_db:.4f}" if rain is not None else ""})
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore", lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(sorted(summary, key=lambda r: r["_i"]))
-    write_text(out / "summary.csv", buf.getvalue())
+    merge_summary(out / "summary.csv", sorted(summary, key=lambda r: r["_i"]), write_text)
+    print(f"results in {out}/ (summary.csv lists every run made into this folder)", file=sys.stderr)
     n_failed = sum(1 for r in summary if str(r.get("status", "")).startswith("error"))
     if n_failed == 0:
         return EXIT_OK
     return EXIT_FAILED if ran else EXIT_USAGE
+
+
+#: Columns of ``run``'s summary.csv, in order (see the README's table of CSV columns).
+SUMMARY_COLUMNS = ("input", "clip", "model", "condition", "params", "trace", "frames", "video_fps", "first_alert",
+                   "max_output", "proc_fps", "status", "rain_snr_db")
+
+
+def trace_file_name(clip: str, model: str, condition: str) -> str:
+    """``<clip>.<model>.csv`` for clean input, ``<clip>.<model>.<condition>.csv`` otherwise (``.rain``)."""
+    return f"{clip}.{model}.csv" if condition == "clean" else f"{clip}.{model}.{condition}.csv"
+
+
+def params_text(model) -> str:
+    """The model's parameters that differ from its defaults, ``NAME=VALUE;...`` (empty: all defaults)."""
+    params = getattr(model, "params", None)
+    if params is None or not hasattr(params, "to_dict"):
+        return ""
+    try:
+        default = type(params)().to_dict()
+    except TypeError:
+        default = {}
+    return ";".join(f"{k}={v}" for k, v in params.to_dict().items() if default.get(k, object()) != v)
+
+
+def _summary_key(row: dict) -> tuple[str, str, str]:
+    return (str(row.get("clip", "")), str(row.get("model", "")), str(row.get("condition") or "clean"))
+
+
+def read_summary(path: Path) -> list[dict]:
+    """The rows of an existing ``summary.csv`` (none when absent or unreadable).
+
+    Rows written before the summary had a ``condition`` column get one: ``rain`` where a rain SNR
+    was recorded, else ``clean``; the old ``fps`` column (processing speed) becomes ``proc_fps``.
+    """
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return []
+    rows = []
+    for row in csv.DictReader(io.StringIO(text)):
+        if not row.get("condition"):
+            row["condition"] = "rain" if row.get("rain_snr_db") else "clean"
+        if "fps" in row and "proc_fps" not in row:
+            row["proc_fps"] = row.pop("fps")
+        rows.append(row)
+    return rows
+
+
+def merge_summary(path: Path, new_rows: list[dict], write_text) -> None:
+    """Merge ``new_rows`` into ``path`` (atomically), keyed by clip, model and condition.
+
+    A new row replaces the earlier row of the same key (its trace file was replaced too, and a
+    note on stderr says so when the earlier one was made with other parameters); a failed input
+    replaces no earlier row; every other earlier row is kept, so separate runs into one folder
+    add up.
+    """
+    old = read_summary(path)
+    old_keys = {_summary_key(r) for r in old}
+    # a failed input replaces nothing: the earlier trace of that key is still on disk, and so stays its row
+    new_rows = [r for r in new_rows if not (str(r.get("status", "")).startswith("error")
+                                             and _summary_key(r) in old_keys)]
+    new_keys = {_summary_key(r) for r in new_rows}
+    for r in old:
+        mine = next((n for n in new_rows if _summary_key(n) == _summary_key(r)), None)
+        if mine is not None and r.get("status") != "" and not str(r.get("status", "")).startswith("error") \
+                and (r.get("params") or "") != (mine.get("params") or ""):
+            print(f"note: {path.parent / mine['trace']} replaces the trace of an earlier run made with other "
+                  f"parameters ({r.get('params') or 'defaults'} -> {mine.get('params') or 'defaults'})",
+                  file=sys.stderr)
+    kept = [r for r in old if _summary_key(r) not in new_keys]
+    columns = list(SUMMARY_COLUMNS) + [c for r in kept for c in r if c not in SUMMARY_COLUMNS and c != "_i"]
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(dict.fromkeys(columns)), extrasaction="ignore",
+                            lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(kept + new_rows)
+    write_text(path, buf.getvalue())
 
 
 def _exit_now(code: int) -> None:

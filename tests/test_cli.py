@@ -151,3 +151,58 @@ def test_a_bad_option_is_one_error_line_pointing_to_help(capsys, argv):
     err = capsys.readouterr().err
     assert e.value.code == 2
     assert err.startswith("error: ") and err.endswith("--help)\n") and err.count("\n") == 1
+
+
+def _summary(out):
+    return list(csv.DictReader(open(out / "summary.csv")))
+
+
+def test_clean_and_rain_runs_into_one_folder_keep_both_traces(looming_npy, tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main([str(looming_npy), "--out", str(out), "--no-progress"]) == 0
+    clean = (out / "looming.cdnf.csv").read_text()
+    assert main([str(looming_npy), "--out", str(out), "--no-progress", "--rain", "--rain-drops", "20"]) == 0
+    assert (out / "looming.cdnf.csv").read_text() == clean
+    assert (out / "looming.cdnf.rain.csv").read_text() != clean
+    rows = _summary(out)
+    assert [(r["clip"], r["condition"], r["trace"]) for r in rows] == [
+        ("looming", "clean", "looming.cdnf.csv"), ("looming", "rain", "looming.cdnf.rain.csv")]
+
+
+def test_summary_lists_every_run_made_into_the_folder(looming_npy, tmp_path, capsys):
+    out = tmp_path / "o"
+    other = tmp_path / "other.npy"
+    other.write_bytes(looming_npy.read_bytes())
+    assert main([str(looming_npy), "--out", str(out), "--no-progress"]) == 0
+    assert main([str(other), "--out", str(out), "--no-progress", "--model", "lgmd2"]) == 0
+    assert main([str(looming_npy), "--out", str(out), "--no-progress"]) == 0  # the same key again: replaced
+    rows = _summary(out)
+    assert sorted((r["clip"], r["model"]) for r in rows) == [("looming", "cdnf"), ("other", "lgmd2")]
+
+
+def test_summary_names_video_and_processing_rates_apart(looming_npy, tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main([str(looming_npy), "--out", str(out), "--no-progress", "--fps", "25"]) == 0
+    row = _summary(out)[0]
+    assert "fps" not in row and float(row["video_fps"]) == 25 and float(row["proc_fps"]) > 0
+
+
+def test_run_removes_its_lock_and_says_where_it_wrote(looming_npy, tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main([str(looming_npy), "--out", str(out), "--no-progress"]) == 0
+    assert not (out / ".cdnf_ti.lock").exists()
+    assert f"results in {out.resolve()}/" in capsys.readouterr().err
+
+
+def test_a_folder_made_for_a_run_that_wrote_nothing_is_removed(tmp_path, capsys):
+    out = tmp_path / "new" / "o"
+    assert main([str(tmp_path / "missing.mp4"), "--out", str(out)]) == 2
+    assert not out.exists()
+
+
+def test_a_run_whose_every_input_is_missing_leaves_an_existing_folder_as_it_was(tmp_path, capsys):
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    assert main([str(tmp_path / "missing.mp4"), "--out", str(out)]) == 2
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]

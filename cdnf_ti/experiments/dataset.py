@@ -37,6 +37,7 @@ from .layout import (
     fingerprint as fingerprint,
     load_meta as load_meta,
     rain_seed as rain_seed,
+    report_stale,
     trace_path as trace_path,
 )
 from .parallel import TaskFailed, init_worker
@@ -149,7 +150,7 @@ def run_clip_task(task: ClipTask) -> list[dict]:
                 source=str(task.path), seed=task.seed if rain is not None else None,
                 rain_seed=rain_seed(task.seed, task.clip) if rain is not None else None, error="",
                 fingerprint=fingerprint(task.path, task.condition, name, task.seed, task.backend,
-                                        task.rain_params),
+                                        task.rain_params, task.arch),
             )
             trace.to_csv(trace_path(task.out, task.condition, task.clip, name))
             atomic_write_json(trace_path(task.out, task.condition, task.clip, name, "json"), meta)
@@ -317,12 +318,13 @@ def _run_locked(folder, labels_path, labels, files, out, models, conditions, pad
     metas: dict[tuple[str, str, str], dict] = {}
     tasks: list[ClipTask] = []
     skipped = 0
+    stale: list[str] = []
     for lab in labels:
         for cond in conditions:
             todo = []
             for m in models:
                 meta = load_meta(out, cond, lab.clip, m,
-                                 fingerprint(files[lab.clip], cond, m, seed, backend, rain_params))
+                                 fingerprint(files[lab.clip], cond, m, seed, backend, rain_params, arch), stale)
                 if meta is not None:
                     metas[(lab.clip, m, cond)] = meta
                     skipped += 1
@@ -331,6 +333,7 @@ def _run_locked(folder, labels_path, labels, files, out, models, conditions, pad
             if todo:
                 tasks.append(ClipTask(lab.clip, str(files[lab.clip]), cond, tuple(todo), str(out), seed,
                                       backend, arch, rain_params))
+    report_stale(stale)
     ran = 0
     for i, res in parallel.map_tasks(run_clip_task, tasks, workers=workers, scheduler=scheduler, arch=arch,
                             progress="clips" if progress else False, describe=describe_task):

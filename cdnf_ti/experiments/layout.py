@@ -11,7 +11,7 @@ import zlib
 from pathlib import Path
 from typing import Any
 
-from .._version import __version__
+from ..provenance import code_identity, describe_differences, differences
 
 CONDITIONS = ("clean", "rain")
 RAIN_CHOICES = {"none": ("clean",), "only": ("rain",), "both": ("clean", "rain")}
@@ -37,28 +37,32 @@ def trace_path(out: str | os.PathLike, condition: str, clip: str, model: str, ex
 
 
 def fingerprint(path: str | os.PathLike, condition: str, model: str, seed: int, backend: str,
-                rain_params: dict | None) -> dict:
-    """What a saved result depends on: the input file (path, size, mtime), the model and
-    backend, the package version and, for rain, the seed and rain settings.
+                rain_params: dict | None, arch: str = "cpu") -> dict:
+    """What a saved result depends on: the input file (path, size, mtime), the model, the code that
+    ran it (:func:`cdnf_ti.provenance.code_identity`: a digest of the package's source files, the
+    kernel compiler and its version, the arch and the engine settings) and, for rain, the seed and
+    rain settings.
 
-    A finished result is reused on a rerun only when its fingerprint is the same, so
-    changing ``--seed``, the rain settings, the backend, the input or cdnf_ti itself
-    recomputes it.
+    A finished result is reused on a rerun only when its fingerprint is the same, so changing
+    ``--seed``, the rain settings, the backend, the compiler, the input or any source file of
+    cdnf_ti recomputes it.
     """
     st = os.stat(path)
     fp: dict[str, Any] = {"source": str(path), "source_size": st.st_size, "source_mtime_ns": st.st_mtime_ns,
-                          "model": model, "backend": backend, "condition": condition, "version": __version__}
+                          "model": model, "condition": condition, **code_identity(backend, arch)}
     if condition == "rain":
         fp.update(seed=seed, rain_params=rain_params or {})
     return json.loads(json.dumps(fp))  # the form it takes after a JSON round trip
 
 
 def load_meta(out: str | os.PathLike, condition: str, clip: str, model: str,
-              expected: dict | None = None) -> dict | None:
+              expected: dict | None = None, stale: list[str] | None = None) -> dict | None:
     """The finished record of (clip, model, condition), or None if not finished.
 
-    With ``expected`` (a :func:`fingerprint`), a record made with other options or
-    another input counts as not finished.
+    With ``expected`` (a :func:`fingerprint`), a record made with other code, options or
+    another input counts as not finished; when ``stale`` is a list, a line naming the record
+    and what differs (``"c01.cdnf [clean]: source code"``) is appended to it, so the caller
+    can say what it recomputes.
     """
     jp = trace_path(out, condition, clip, model, "json")
     cp = trace_path(out, condition, clip, model, "csv")
@@ -71,5 +75,23 @@ def load_meta(out: str | os.PathLike, condition: str, clip: str, model: str,
     if not isinstance(meta, dict) or meta.get("model") != model:
         return None
     if expected is not None and meta.get("fingerprint") != expected:
+        if stale is not None:
+            what = describe_differences(differences(meta.get("fingerprint"), expected))
+            stale.append(f"{clip}.{model} [{condition}]: {what or 'fingerprint'}")
         return None
     return meta
+
+
+def report_stale(stale: list[str], stream: Any = None) -> None:
+    """Say, on stderr, that finished results made by other code or options are recomputed.
+
+    One line with the count and the first few results and what differs; nothing when none.
+    """
+    if not stale:
+        return
+    import sys
+
+    stream = sys.stderr if stream is None else stream
+    shown = "; ".join(stale[:3]) + (f"; and {len(stale) - 3} more" if len(stale) > 3 else "")
+    print(f"note: {len(stale)} finished result(s) in the output folder were made by other code or options "
+          f"and are recomputed ({shown})", file=stream)

@@ -45,7 +45,7 @@ from ..models.base import NotConvergedWarning, Trace
 from ..stimuli.rain import RainyFrames
 from .clipscores import choose_level, correctness_matrix, cross_validated_accuracy, roc
 from .labels import read_labels, validate_dataset
-from .layout import RAIN_CHOICES, fingerprint, load_meta, rain_seed, trace_path
+from .layout import RAIN_CHOICES, fingerprint, load_meta, rain_seed, report_stale, trace_path
 from .parallel import TaskFailed, map_tasks
 from .scoring import Padding, score_clip
 from .sweep import sweep_first_alerts, sweep_spec
@@ -242,7 +242,7 @@ def setting_folder(out: str | os.PathLike, key: str) -> Path:
 
 def task_fingerprint(task: SweepTask) -> dict:
     """The dataset fingerprint of the input plus the setting and the downscale factor."""
-    fp = fingerprint(task.path, task.condition, task.model, task.seed, task.backend, None)
+    fp = fingerprint(task.path, task.condition, task.model, task.seed, task.backend, None, task.arch)
     fp["params"] = {k: v for k, v in task.setting}
     fp["downscale"] = task.downscale
     return json.loads(json.dumps(fp))
@@ -364,18 +364,20 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
     records: dict[tuple, dict] = {}
     tasks: list[SweepTask] = []
     skipped = 0
+    stale: list[str] = []
     for s in settings:
         key = setting_key(s)
         for cond in conditions:
             for lab in labels:
                 t = SweepTask(lab.clip, str(Path(files[lab.clip]).resolve()), name, tuple(s.items()), key, cond,
                               str(out), seed, backend, arch, float(downscale))
-                meta = load_meta(setting_folder(out, key), cond, lab.clip, name, task_fingerprint(t))
+                meta = load_meta(setting_folder(out, key), cond, lab.clip, name, task_fingerprint(t), stale)
                 if meta is not None:
                     records[(key, cond, lab.clip)] = meta
                     skipped += 1
                 else:
                     tasks.append(t)
+    report_stale(stale)
     ran = 0
     errors = []
     extra = {}

@@ -46,10 +46,12 @@ from ..errors import UserError
 from ..models import create_model
 from ..models.base import NotConvergedWarning
 from ..paper import TABLE1
+from ..provenance import code_identity, describe_differences, differences
 from ..stimuli.basic import basic_stimulus
 from ..stimuli.grating import GratingStimulus
 from ..stimuli.incoherent import IncoherentStimulus
 from .figures import _plt, save_figure
+from .layout import report_stale
 from .parallel import TaskFailed, _one_line, init_worker, map_tasks
 
 BASE_SIZE = {"quick": 120, "full": 240}
@@ -241,6 +243,11 @@ class GridTask:
         return f"{self.point.stimulus}.{self.model}.{h}"
 
     @property
+    def code(self) -> dict:
+        """The code that makes this task's result (:func:`cdnf_ti.provenance.code_identity`)."""
+        return code_identity(self.backend, self.arch)
+
+    @property
     def result_file(self) -> Path:
         return Path(self.out) / "tasks" / f"{self.key}.json"
 
@@ -261,7 +268,8 @@ def run_grid_task(task: GridTask) -> dict:
         tr = model.run(stim.frames(), progress=False)
     tr.to_csv(task.trace_file)
     spikes = [int(i) for i, s in enumerate(tr.spike) if s]
-    rec = {"spec": task.spec, "alert": int(tr.first_alert is not None), "first_alert": tr.first_alert,
+    rec = {"spec": task.spec, "code": task.code, "alert": int(tr.first_alert is not None),
+           "first_alert": tr.first_alert,
            "alert_frames": len(spikes), "frames": tr.n_frames, "fps": fps,
            "max_output": float(tr.output.max()), "argmax_output": int(tr.output.argmax()),
            "threshold": tr.threshold, "seconds": round(tr.seconds, 3)}
@@ -307,14 +315,23 @@ def make_batches(tasks: Sequence[GridTask], chunk: int = 16) -> list[GridBatch]:
     return out
 
 
-def _load_done(task: GridTask) -> dict | None:
+def _load_done(task: GridTask, stale: list[str] | None = None) -> dict | None:
+    """The finished result of ``task``, or None; one made by other code is not finished (and is named
+    in ``stale`` with what differs)."""
     try:
         rec = json.loads(task.result_file.read_text())
     except (OSError, ValueError):
         return None
     same = json.dumps(rec.get("spec"), sort_keys=True, default=str) == json.dumps(task.spec, sort_keys=True,
                                                                                    default=str)
-    return rec if same and rec.get("alert") in (0, 1) else None
+    if not (same and rec.get("alert") in (0, 1)):
+        return None
+    code = json.loads(json.dumps(task.code))
+    if rec.get("code") != code:
+        if stale is not None:
+            stale.append(f"{task.key}: {describe_differences(differences(rec.get('code'), code)) or 'code'}")
+        return None
+    return rec
 
 
 def selectivity_sweep(models: Sequence[str], out: str | Path, which: str = "quick",
@@ -340,7 +357,9 @@ def selectivity_sweep(models: Sequence[str], out: str | Path, which: str = "quic
             raise UserError(f"unknown stimulus class {bad[0]!r}; choose from {', '.join(CLASSES)}")
         pts = [p for p in pts if p.cls in classes]
     tasks = [GridTask(m, p, seed, str(out), backend, arch) for p in pts for m in models]
-    results: list[dict | None] = [_load_done(t) for t in tasks]
+    stale: list[str] = []
+    results: list[dict | None] = [_load_done(t, stale) for t in tasks]
+    report_stale(stale)
     todo = [i for i, r in enumerate(results) if r is None]
     reused = len(tasks) - len(todo)
     index = {tasks[i].key: i for i in todo}
