@@ -1,5 +1,28 @@
 """Command-line helpers shared by every subcommand: model options, argparse types, exit codes.
 
+The option scheme: one meaning per name in every subcommand (the README's "Options" table).
+
+==========================  =======================================================================
+``INPUT ...``               video file, image folder, ``.npy`` array, ``stim:NAME?...`` (positional)
+``--model M[,M..]|all``     the models to run (``--models`` is the same option)
+``--param [M.]NAME=VALUE``  set a model parameter (repeatable; :mod:`cdnf_ti.param_options`);
+                            ``experiment sweep`` spells a grid the same way (``NAME=V1,V2``)
+``--epsilon X``             shortcut for ``--param cdnf.epsilon=X``; an error unless cdnf runs
+``--backend``, ``--arch``,  the engine: Taichi kernels or the NumPy float64 reference, the Taichi
+``--compiler``              arch, the kernel compiler
+``--fps N``                 frame rate of file inputs (frames/s); wherever files are read
+``--color-order bgr|rgb``   channel order of colour ``.npy`` arrays; wherever files are read
+``--rain``                  add synthetic rain; ``--rain both`` runs clean and rainy, ``--rain off``
+                            clean only (the batch commands take the same three words)
+``--rain-drops N``          droplets per frame; ``--rain-seed S`` the rain's seed
+``--stimulus-seed S``       the seed of generated stimuli (incoherent dots, grid stimuli)
+``--seed S``                the default of every seed the command has (rain and stimulus)
+``--out DIR``               always a folder (created); a movie path only where the command makes
+                            one file (``render --out FILE.mp4``, ``live --record FILE.mp4``)
+``--workers N``, ``--scheduler ADDRESS``  parallel batch runs
+``--no-progress``           hide progress bars
+==========================  =======================================================================
+
 A leaf module: ``cdnf_ti.run`` (the entry point) and the subcommand modules
 (``demo``, ``generate``, ``render``, ``experiments.cli``, ``bench.cli``) import it;
 it imports none of them.
@@ -39,6 +62,26 @@ def add_model_options(ap: argparse.ArgumentParser, default_models: str = "cdnf")
                     help="Taichi architecture (default: cpu)")
     ap.add_argument("--compiler", choices=COMPILERS, default=None, action=_CompilerAction,
                     help="kernel compiler (default: $CDNF_TI_COMPILER, else the fastest installed)")
+
+
+def add_param_options(ap: argparse.ArgumentParser, epsilon: bool = True) -> None:
+    """``--param [MODEL.]NAME=VALUE`` (repeatable) and the ``--epsilon`` shortcut.
+
+    Read them back with :func:`params_from_args`.
+    """
+    ap.add_argument("--param", action="append", default=[], metavar="[MODEL.]NAME=VALUE",
+                    help="set a model parameter (repeatable): NAME=VALUE for every selected model that has it, "
+                         "MODEL.NAME=VALUE for one model")
+    if epsilon:
+        ap.add_argument("--epsilon", type=finite_float, default=None,
+                        help="C-DNF alert margin (default 0.006); shortcut for --param cdnf.epsilon=X")
+
+
+def params_from_args(args: argparse.Namespace, models: Sequence[str]) -> dict:
+    """``{model: params or None}`` from the options of :func:`add_param_options` (one-line errors)."""
+    from .param_options import model_params
+
+    return model_params(models, getattr(args, "param", []) or [], getattr(args, "epsilon", None))
 
 
 class _CompilerAction(argparse.Action):

@@ -37,9 +37,11 @@ from .cli_common import (
     EXIT_USAGE as EXIT_USAGE,
     ArgumentParser,
     add_model_options as add_model_options,
+    add_param_options,
     check_model_options as check_model_options,
     drops_arg as drops_arg,
     finite_float as finite_float,
+    params_from_args,
     parse_models as parse_models,
     positive_float as positive_float,
     seed_arg as seed_arg,
@@ -52,7 +54,6 @@ from .inputs import resolve_input
 from .limits import check_drops, check_frame_size
 from .models import create_model
 from .models.base import NotConvergedWarning, run_models
-from .params import CDNFParams
 from .stimuli.rain import RainParams, RainyFrames
 from .taichi_runtime import lanes_override
 
@@ -79,7 +80,7 @@ def _videos_parser() -> argparse.ArgumentParser:
                          "'stim:NAME[?coherence=C&seed=S&size=N...]' (see cdnf_ti.inputs)")
     ap.add_argument("--out", default="cdnf_out", help="output folder for traces (default: %(default)s)")
     add_model_options(ap)
-    ap.add_argument("--epsilon", type=finite_float, default=None, help="C-DNF alert margin (default 0.006)")
+    add_param_options(ap)
     ap.add_argument("--fps", type=positive_float, default=None,
                     help="frame rate of the inputs in frames/s (default: a video's own rate; 30 for image "
                          "folders and .npy arrays, which carry none)")
@@ -104,12 +105,7 @@ def run_videos(argv: Sequence[str]) -> int:
     args = _videos_parser().parse_args(argv)
     models = parse_models(args.models)
     check_model_options(args)
-    params = None
-    if args.epsilon is not None and "cdnf" in models:
-        try:
-            params = CDNFParams(epsilon=args.epsilon)
-        except ValueError as e:
-            raise UserError(f"--epsilon: {e}") from None
+    params = params_from_args(args, models)
     existed = Path(args.out).expanduser().exists()
     out = prepare_output(args.out)  # before any work
     with output_lock(out):
@@ -122,7 +118,7 @@ def run_videos(argv: Sequence[str]) -> int:
     return code
 
 
-def _run_videos(args, models: list[str], params, out: Path, write_text) -> int:
+def _run_videos(args, models: list[str], params: dict, out: Path, write_text) -> int:
     rain_params = None
     if args.rain:
         rain_params = RainParams(drops=args.rain_drops)
@@ -152,7 +148,7 @@ def _run_videos(args, models: list[str], params, out: Path, write_text) -> int:
               file=sys.stderr)
     ran = 0
     for (path, src), clip, index in zip(sources, names, order):
-        instances = [create_model(name, params if name == "cdnf" else None, backend=args.backend,
+        instances = [create_model(name, params[name], backend=args.backend,
                                   arch=args.arch, fps=src.fps) for name in models]
         rain = None
         errors: list = []

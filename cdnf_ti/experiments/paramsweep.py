@@ -26,7 +26,6 @@ import dataclasses
 import inspect
 import itertools
 import json
-import math
 import os
 import time
 import warnings
@@ -42,6 +41,7 @@ from ..errors import InputError, UserError
 from ..frames import iter_grey, open_source
 from ..models import create_model, get_model_class
 from ..models.base import NotConvergedWarning, Trace
+from ..param_options import convert_value, field_kind
 from ..stimuli.rain import RainyFrames
 from .clipscores import choose_level, correctness_matrix, cross_validated_accuracy, roc
 from .labels import read_labels, validate_dataset
@@ -62,45 +62,6 @@ class ParamAxis:
     values: tuple
 
 
-def _field_kind(params_type: type, name: str) -> str:
-    fields = {f.name: f for f in dataclasses.fields(params_type)}
-    if name not in fields:
-        tunable = ", ".join(f.name for f in dataclasses.fields(params_type))
-        raise UserError(f"--param {name}: unknown parameter of {params_type.__name__}; known: {tunable}")
-    t = fields[name].type
-    t = t if isinstance(t, str) else getattr(t, "__name__", str(t))
-    for kind in ("bool", "int", "float", "str"):
-        if t.replace(" ", "").split("|")[0] == kind:
-            return kind
-    return "float"
-
-
-def _convert(kind: str, name: str, text: str) -> Any:
-    s = text.strip()
-    if s == "":
-        raise UserError(f"--param {name}: empty value")
-    if kind == "bool":
-        low = s.lower()
-        if low in ("1", "true", "yes", "on"):
-            return True
-        if low in ("0", "false", "no", "off"):
-            return False
-        raise UserError(f"--param {name}: {s!r} is not a boolean (true/false)")
-    if kind == "str":
-        return s
-    try:
-        v = float(s)
-    except ValueError:
-        raise UserError(f"--param {name}: {s!r} is not a number") from None
-    if not math.isfinite(v):
-        raise UserError(f"--param {name}: {s!r} is not a finite number")
-    if kind == "int":
-        if not v.is_integer():
-            raise UserError(f"--param {name}: {s!r} is not a whole number ({name} is an integer)")
-        return int(v)
-    return v
-
-
 def parse_param(spec: str, params_type: type) -> ParamAxis:
     """Parse ``NAME=START:STOP:N``, ``NAME=V1,V2,...`` or ``NAME=V``.
 
@@ -114,7 +75,7 @@ def parse_param(spec: str, params_type: type) -> ParamAxis:
     name = name.strip()
     if not eq or not name:
         raise UserError(f"--param {spec!r}: expected NAME=START:STOP:N or NAME=V1,V2,...")
-    kind = _field_kind(params_type, name)
+    kind = field_kind(params_type, name)
     body = body.strip()
     if ":" in body:
         parts = body.split(":")
@@ -122,7 +83,7 @@ def parse_param(spec: str, params_type: type) -> ParamAxis:
             raise UserError(f"--param {name}={body}: a range is START:STOP:N (three parts)")
         if kind in ("bool", "str"):
             raise UserError(f"--param {name}={body}: {name} is a {kind}; list its values instead")
-        a, b = (_convert("float", name, p) for p in parts[:2])
+        a, b = (convert_value("float", name, p) for p in parts[:2])
         try:
             n = int(parts[2])
         except ValueError:
@@ -140,7 +101,7 @@ def parse_param(spec: str, params_type: type) -> ParamAxis:
                                  f"non-integer values {vals}")
             vals = [int(v) for v in vals]
     else:
-        vals = [_convert(kind, name, p) for p in body.split(",")]
+        vals = [convert_value(kind, name, p) for p in body.split(",")]
     if len(set(vals)) != len(vals):
         raise UserError(f"--param {name}={body}: a value is repeated")
     return ParamAxis(name, tuple(vals))
