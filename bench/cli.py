@@ -278,7 +278,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=None, help="timed repeats, median reported (default 3)")
     ap.add_argument("--model", "--models", dest="models", default=None,
                     help="model name(s), comma separated, or 'all' (default: all; cdnf with --quick)")
-    ap.add_argument("--clip", default=None, help="real video to use (default: the shared c38/serial clip if present)")
+    ap.add_argument("--clip", default=None, help="real video to use (default: the development clip serial_vehicle_collision if present, "
+                         "else a generated stand-in)")
     ap.add_argument("--sizes", default=None,
                     help="comma-separated WxH list (default: 426x240,600x600)")
     ap.add_argument("--no-reference", action="store_true", help="skip the float64 reference comparison")

@@ -1,4 +1,4 @@
-"""Benchmark inputs: basic stimuli, the shared dashcam clips, or a generated stand-in video."""
+"""Benchmark inputs: basic stimuli, the development dashcam clips, or a generated stand-in video."""
 from __future__ import annotations
 
 import os
@@ -6,18 +6,19 @@ from pathlib import Path
 
 import numpy as np
 
-#: The shared dashcam clips (426/432 x 240), next to the repository when present.
+#: The development dashcam clips (426/432 x 240), beside the repository when present
+#: (``$CDNF_TI_SHARED/data/real``).
 SHARED_REAL = (Path(os.environ.get("CDNF_TI_SHARED", Path(__file__).resolve().parents[1].parent / "shared"))
                / "data" / "real")
 
 
 def shared_clip(name: str = "serial_vehicle_collision") -> Path | None:
-    """Path of a shared dashcam clip, or ``None`` when ``../shared`` is absent."""
+    """Path of a development dashcam clip, or ``None`` when the clips are absent."""
     p = SHARED_REAL / f"{name}.mp4"
     return p if p.exists() else None
 
 
-#: The shared clip that is exactly 426x240.
+#: The development clip that is exactly 426x240.
 DEFAULT_CLIP = "serial_vehicle_collision"
 
 

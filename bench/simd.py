@@ -9,7 +9,7 @@ IR written out), then counts, in each solve launch, the float arithmetic instruc
 It answers the question behind most of the C-DNF engine's speed on a given machine: does the
 compiler turn the lane layout (``kernels/common.py``, ``LANES`` columns per vector element)
 into vector code, and how wide? Two facts found in the compilers' source make this differ
-between machines and compilers (docs/PERFORMANCE.md, round 8):
+between machines and compilers (docs/PERFORMANCE.md, "Design decisions that still hold"):
 
 * taichi 1.7.4 optimises for ``sys::getHostCPUName()`` with an empty feature string; its
   LLVM 15 names CPUs newer than it (AMD Zen 5) ``generic``, so the vectoriser forms 128-bit

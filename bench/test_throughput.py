@@ -6,8 +6,8 @@ timing); ``extra_info`` holds frames/s and the iteration counts. The peers
 run in the same session, so ratios can be read from one run; for a ready-made
 table use ``python -m cdnf_ti.run bench``.
 
-Inputs: a basic stimulus (dark looming) and real footage (the shared dashcam
-clip ``serial_vehicle_collision`` when ``../shared`` is present, else a
+Inputs: a basic stimulus (dark looming) and real footage (the development dashcam
+clip ``serial_vehicle_collision`` when present, else a
 generated stand-in video), each at 426x240 and 600x600.
 
 One process runs one kernel compiler: ``CDNF_TI_COMPILER=quadrants pytest bench/

@@ -1,4 +1,4 @@
-"""Reference numbers from the C-DNF paper (shared/spec/EVALUATION.md)."""
+"""Reference numbers from the C-DNF paper (its Tables I and II; docs/EVALUATION.md)."""
 from __future__ import annotations
 
 #: Table I: 1 = the model alerts on the stimulus. Keys are cdnf_ti model names.

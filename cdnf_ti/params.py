@@ -1,6 +1,6 @@
 """C-DNF model description: parameters, activation functions and lateral kernels.
 
-Everything the equations of ``shared/spec/MODEL.md`` need lives here, in NumPy,
+Everything the equations of ``docs/EQUATIONS.md`` need lives here, in NumPy,
 independent of any execution backend:
 
 * ``u_on  = P_on  - h + vartheta(W_c (*) u_on)``           (ON contrast field)
@@ -99,7 +99,7 @@ class ModelParams:
 
 @dataclass(frozen=True)
 class CDNFParams(ModelParams):
-    """Parameters of the C-DNF model (defaults from MODEL.md / the paper).
+    """Parameters of the C-DNF model (defaults from the paper, docs/EQUATIONS.md).
 
     Attributes
     ----------
@@ -126,7 +126,7 @@ class CDNFParams(ModelParams):
     damping : float
         Initial relaxation ``lambda`` in ``u <- (1 - lambda) u + lambda F(u)`` (1.0).
     contrast_relaxation : float
-        Relaxation of the ON/OFF fields' plain iteration (1.0, MODEL.md's ``lambda = 1``;
+        Relaxation of the ON/OFF fields' plain iteration (1.0, the paper's ``lambda = 1``;
         used by ``scheme="plain"`` and the Chebyshev safeguard's fallback).
         The contrast map's Jacobian ``0.5 sech^2(.) W_c`` has its spectrum in
         [0, 1/2] (``W_c`` is positive definite with eigenvalues <= 1), so any value
@@ -149,7 +149,7 @@ class CDNFParams(ModelParams):
         Spectral bounds ``[a, b]`` of the maps' Jacobians for the Chebyshev scheme;
         ``None`` (default): computed from the kernels (:func:`jacobian_bounds`).
     start : {"local", "previous", "rest"}
-        Where each frame's iteration starts (all give the same fixed point, MODEL.md):
+        Where each frame's iteration starts (all give the same fixed point, docs/EQUATIONS.md):
         ``"local"`` (default): every pixel at the stationary value its own input would
         have if all its neighbours had the same (``u = x - h + vartheta(sum(W) u)``,
         :func:`stationary_level`; ``x = P_on``/``P_off`` for the contrast fields, ``S``

@@ -6,7 +6,7 @@ A backend supplies ``iterate(lam, mom=0.0) -> residuals``: one update
 
 of one or more coupled fields (``u_prev`` is the iterate before ``u``), returning
 the residual ``max |F(u) - u|`` of each field *at u*, i.e. the plain map's
-residual that MODEL.md binds. Optionally ``iterate_many([(lam, mom), ...])``
+residual that docs/EQUATIONS.md makes binding. Optionally ``iterate_many([(lam, mom), ...])``
 runs several such updates in one kernel launch and stops early once every
 residual is at most ``tol``.
 

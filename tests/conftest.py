@@ -31,7 +31,7 @@ def taichi_runtime():
 
 @pytest.fixture(scope="session")
 def shared_real() -> Path | None:
-    """The shared dashcam clips folder, or None when ../shared is absent."""
+    """The development dashcam clips folder ($CDNF_TI_SHARED/data/real), or None when absent."""
     return SHARED_REAL if (SHARED_REAL / "labels.csv").exists() else None
 
 

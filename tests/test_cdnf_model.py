@@ -155,7 +155,7 @@ def test_unknown_arch_is_a_clear_error(arch):
 
 def test_real_clip_taichi_agrees_with_reference(shared_real):
     if shared_real is None:
-        pytest.skip("../shared/data/real not present (covered by the generated-video tests)")
+        pytest.skip("the development dashcam clips are not present (covered by the generated-video tests)")
     from itertools import islice
 
     from cdnf_ti.frames import iter_grey, open_source

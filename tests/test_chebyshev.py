@@ -139,7 +139,7 @@ def test_several_updates_per_launch_give_the_same_trace_and_counts():
 
 def test_real_clip_agrees_with_the_reference_under_both_schemes(shared_real):
     if shared_real is None:
-        pytest.skip("../shared/data/real not present")
+        pytest.skip("the development dashcam clips are not present")
     from cdnf_ti.frames import iter_grey, open_source
 
     frames = [f[::2, ::2] for f in iter_grey(open_source(shared_real / "serial_vehicle_collision.mp4"))]

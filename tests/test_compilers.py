@@ -218,7 +218,8 @@ def test_another_taichi_program_with_a_small_cache_evicts_none_of_cdnf_tis_kerne
 
 @pytest.mark.parametrize("compiler", installed_compilers())
 def test_the_lane_width_of_the_fast_path_suits_the_compiler(compiler):
-    # both compilers run the lane kernels fastest with 32 lanes (docs/PERFORMANCE.md, round 14)
+    # both compilers run the lane kernels fastest with 32 lanes
+    # (docs/PERFORMANCE.md, "Design decisions that still hold")
     code = ("from cdnf_ti.taichi_runtime import ensure_taichi\nensure_taichi('cpu')\n"
             "from cdnf_ti.kernels import cdnf, common, lgmd\nprint(common.LANES, cdnf.LANES, lgmd.LANES)")
     env = dict(os.environ, **{COMPILER_ENV: compiler})

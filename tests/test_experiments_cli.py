@@ -94,7 +94,7 @@ def test_table2_without_a_folder_asks_for_one(monkeypatch, tmp_path, capsys):
 
 def test_table2_on_a_real_dashcam_clip(shared_real, tmp_path):
     if shared_real is None:
-        pytest.skip("../shared/data/real is absent (this test exercises the real clips only)")
+        pytest.skip("the development dashcam clips are absent (this test exercises the real clips only)")
     labels = tmp_path / "labels.csv"
     rows = (shared_real / "labels.csv").read_text().splitlines()
     labels.write_text("\n".join([rows[0]] + [r for r in rows if r.startswith("tc22,")]) + "\n")

@@ -210,15 +210,23 @@ def test_cdnf_alerts_on_incoherent_receding_as_on_coherent_receding(name, c):
 
 
 @pytest.mark.parametrize("name", ["dark_translating", "light_translating"])
-def test_cdnf_on_incoherent_translating_is_pinned(name):
-    """Pinned behaviour (96 px; the same at 600 px, c = 0.2): C-DNF is silent on the coherent bar,
-    but on an incoherent bar its output sits just above the alert threshold (I_v ~ 0.509 vs
-    0.506) from frame 1 on, i.e. it alerts, although far below the looming peak. The paper
-    (Fig. 4) reports no response; see docs/STIMULI.md."""
-    alert, tr = _cdnf_alerts(small(name, 1.0, size=96))
+def test_cdnf_is_silent_on_the_coherent_translating_bar(name):
+    alert, _ = _cdnf_alerts(small(name, 1.0, size=96))
     assert not alert
+
+
+@pytest.mark.parametrize("name", ["dark_translating", "light_translating"])
+@pytest.mark.xfail(strict=True, reason=(
+    "C-DNF alerts on incoherent translating bars: the scattered dots that appear and vanish every "
+    "frame drive I_v to about 0.509, above the 0.506 level, from frame 1 on (paper Fig. 4: no "
+    "response; docs/STIMULI.md, \"Why C-DNF alerts at frame 1 on incoherent translating\")"))
+def test_cdnf_is_silent_on_incoherent_translating_as_the_paper_reports(name):
     alert, tr = _cdnf_alerts(small(name, 0.2, size=96))
-    assert alert and tr.first_alert <= 2
+    assert not alert, f"first alert at frame {tr.first_alert}, max I_v {tr.output.max():.4f}"
+
+
+@pytest.mark.parametrize("name", ["dark_translating", "light_translating"])
+def test_cdnf_response_to_incoherent_translating_stays_below_its_incoherent_looming_peak(name):
+    _, bar = _cdnf_alerts(small(name, 0.2, size=96))
     _, loom = _cdnf_alerts(small("dark_looming", 0.2, size=96))
-    assert tr.output.max() < tr.threshold + 0.01
-    assert tr.output.max() < loom.output.max() - 0.01
+    assert bar.output.max() < loom.output.max() - 0.01

@@ -3,7 +3,7 @@
 Every kernel of the fast paths (``kernels/lgmd.py``: ``lgmd_lanes_load``,
 ``lgmd1_lanes_layers``, ``lgmd2_lanes_layers``, ``flgmd_lanes_*``) is checked against
 :mod:`cdnf_ti.baselines_reference` on generated stimuli (basic, noisy, dashcam-like
-stand-in video and, when ``../shared`` is there, a real clip), at widths that are and
+stand-in video and, when the development clips are there, a real clip), at widths that are and
 are not multiples of the lane width; F-LGMD's solve converging inside its launch and
 outside it.
 """

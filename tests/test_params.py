@@ -1,4 +1,4 @@
-"""C-DNF parameters, activation functions and lateral kernels (MODEL.md)."""
+"""C-DNF parameters, activation functions and lateral kernels (docs/EQUATIONS.md)."""
 import math
 
 import numpy as np

@@ -195,7 +195,7 @@ def test_rain_params_reject_bad_values():
 
 def test_default_rain_snr_on_real_clip_is_near_20_db(shared_real):
     if shared_real is None:
-        pytest.skip("../shared/data/real not present")
+        pytest.skip("the development dashcam clips are not present")
     from cdnf_ti.frames import iter_grey, open_source
 
     src = open_source(shared_real / "nc03.mp4")

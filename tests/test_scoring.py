@@ -1,4 +1,4 @@
-"""Scoring rules of EVALUATION.md on hand-made first alerts, and the threshold sweep."""
+"""Scoring rules of docs/EVALUATION.md on hand-made first alerts, and the threshold sweep."""
 from __future__ import annotations
 
 import numpy as np

@@ -131,7 +131,8 @@ def test_a_gpu_runs_eight_contrast_updates_per_launch_and_the_cpu_one():
 @pytest.mark.parametrize("module", ["cdnf", "lgmd", "sdnf", "stimuli", "common"])
 def test_no_kernel_returns_a_value(module):
     # A kernel's results go to an array argument: a returned vector costs ~210 us per launch on
-    # the CPU under taichi 1.7.4, and a returned reduction 1-2 ms on a GPU (docs/PERFORMANCE.md).
+    # the CPU under taichi 1.7.4, and a returned reduction 1-2 ms on a GPU
+    # (docs/PERFORMANCE.md, "Design decisions that still hold").
     tree = ast.parse((REPO / "kernels" / f"{module}.py").read_text())
     kernels = [f for f in ast.walk(tree) if isinstance(f, ast.FunctionDef)
                and any(ast.unparse(d).endswith("kernel") for d in f.decorator_list)]

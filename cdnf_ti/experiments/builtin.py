@@ -198,7 +198,7 @@ def coherence_markdown(table: dict, coherences: Sequence[float], size: int | Non
 
 
 def default_real_folder() -> Path | None:
-    """``../shared/data/real`` next to the repository (or the current folder), if present."""
+    """The development clips, ``shared/data/real`` beside the repository (or the current folder), if present."""
     here = Path(__file__).resolve().parents[2]
     for base in (here.parent, Path.cwd().parent, Path.cwd()):
         cand = base / "shared" / "data" / "real"

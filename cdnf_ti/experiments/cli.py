@@ -136,7 +136,7 @@ def dataset_main(argv: Sequence[str]) -> int:
     ap = ArgumentParser(
         prog="python -m cdnf_ti.run dataset",
         description="Run models on every labelled clip of a folder (clean and/or with synthetic rain), score "
-                    "them (shared/spec/EVALUATION.md) and write traces, results.csv, summary.md/json and "
+                    "them (docs/EVALUATION.md) and write traces, results.csv, summary.md/json and "
                     "figures. Rerunning with the same OUT skips finished work.")
     ap.add_argument("folder", metavar="DIR", help="folder of videos")
     ap.add_argument("--out", required=True, help="output folder")
@@ -211,7 +211,8 @@ def experiment_main(argv: Sequence[str]) -> int:
     _add_parallel(p4)
     p3 = sub.add_parser("table2", help="accuracy on a labelled folder, clean and with synthetic rain (Table II)")
     p3.add_argument("folder", nargs="?", default=None, metavar="DIR",
-                    help="folder of videos with labels.csv (default: ../shared/data/real next to the repository)")
+                    help="folder of videos with labels.csv (default: the development clips, shared/data/real "
+                         "beside the repository, when present)")
     p3.add_argument("--out", default="cdnf_experiments/table2", help="output folder (default: %(default)s)")
     _add_dataset_options(p3, rain_default="both")
     p4 = sub.add_parser("sweep", help="a grid of one model's parameters over a labelled folder: accuracy, "
@@ -236,7 +237,7 @@ def experiment_main(argv: Sequence[str]) -> int:
     if args.which == "table2":
         folder = Path(args.folder) if args.folder else builtin.default_real_folder()
         if folder is None:
-            raise InputError("table2", "no labelled folder given and ../shared/data/real was not found; "
+            raise InputError("table2", "no labelled folder given and the development clips were not found; "
                                        "pass one: python -m cdnf_ti.run experiment table2 DIR")
         return _dataset(args, folder, Path(args.out))
     if args.size < 16:

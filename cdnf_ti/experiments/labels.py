@@ -1,4 +1,4 @@
-"""Labels of a dataset: reading and validating the labels CSV (shared/spec/EVALUATION.md).
+"""Labels of a dataset: reading and validating the labels CSV (docs/EVALUATION.md).
 
 A labels file has one row per clip; columns are found by their header names
 (``clip,label,window_start,window_end[,contact_frame]``) and any other column

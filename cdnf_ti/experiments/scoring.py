@@ -1,4 +1,4 @@
-"""Scoring a model's alerts against clip labels (paper Section III-C, shared/spec/EVALUATION.md).
+"""Scoring a model's alerts against clip labels (paper Section III-C, docs/EVALUATION.md).
 
 * collision clip: TP if the FIRST alert falls inside the (optionally padded)
   window, otherwise FN with the reason ``none`` (never alerts), ``early``

@@ -10,6 +10,10 @@ yourself, install Mono's C# compiler (``apt-get install mono-mcs``), then
 selectivity grid (:mod:`cdnf_ti.experiments.selectivity`) and counts the grid
 points where their LGMD2 and ours differ in alerting (and first alert frame).
 
+Both published versions of the file build: the class is ``lgmd2OpenSource`` in the July
+2019 upload and ``LGMD2OpenSource`` since October 2019 (the equations are the same); the
+driver subclasses whichever the file defines.
+
 A small driver of ours (below) subclasses their class, feeds it the frames as
 8-bit grey (``LGMD2_Processing(previous, current, t)`` for t = 1, 2, ...) and
 prints its sigmoid membrane potential, SFA output, spikes, spike count and
@@ -18,6 +22,7 @@ implementation alerts, and the largest per-frame differences.
 """
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 import tempfile
@@ -30,7 +35,7 @@ DRIVER = r"""
 using System;
 namespace LGMD
 {
-    internal class Driver : lgmd2OpenSource
+    internal class Driver : BASE_CLASS
     {
         Driver(int w, int h, int fps) : base(w, h, fps) { }
         static void Main(string[] args)
@@ -68,8 +73,29 @@ CASES = [
 ]
 
 
+#: The LGMD2 class's name in the authors' file: ``lgmd2OpenSource`` until October 2019, then
+#: ``LGMD2OpenSource``.
+CLASS_NAMES = ("LGMD2OpenSource", "lgmd2OpenSource")
+
+
+def lgmd2_class_name(source: str) -> str:
+    """The name of the LGMD2 class that ``source`` (the authors' C# file) defines.
+
+    Raises
+    ------
+    SystemExit
+        With a one-line message when the file defines neither name.
+    """
+    for name in CLASS_NAMES:
+        if re.search(rf"\bclass\s+{name}\b", source):
+            return name
+    raise SystemExit(f"error: the C# file defines no class named {' or '.join(CLASS_NAMES)}; "
+                     "is it the authors' lgmd2OpenSource.cs?")
+
+
 def build(cs_file: Path, work: Path) -> Path:
-    (work / "Driver.cs").write_text(DRIVER)
+    base = lgmd2_class_name(cs_file.read_text(encoding="utf-8", errors="replace"))
+    (work / "Driver.cs").write_text(DRIVER.replace("BASE_CLASS", base))
     exe = work / "lgmd2.exe"
     subprocess.run(["mcs", "-nowarn:0169,0414", f"-out:{exe}", str(cs_file), str(work / "Driver.cs")], check=True)
     return exe
