@@ -9,7 +9,6 @@ from pathlib import Path
 
 import pytest
 
-import cdnf_ti
 from cdnf_ti.experiments.layout import fingerprint, load_meta
 from cdnf_ti.experiments.synthetic import make_synthetic_dataset
 from cdnf_ti.provenance import code_identity, differences, source_digest
@@ -74,8 +73,8 @@ def test_code_identity_names_the_compiler_arch_and_lanes(monkeypatch):
 
 @pytest.mark.parametrize("change", ["compiler", "compiler_version", "arch", "source_digest", "lanes"])
 def test_a_result_made_by_other_code_is_not_finished(tmp_path, change):
-    from cdnf_ti.experiments.layout import trace_path
     from cdnf_ti.atomic import atomic_write_json
+    from cdnf_ti.experiments.layout import trace_path
 
     clip = tmp_path / "clip.npy"
     clip.write_bytes(b"x")
