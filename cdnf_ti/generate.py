@@ -3,6 +3,7 @@
 Usage::
 
     python -m cdnf_ti.run generate dark_looming --coherence 0.2 --seed 3 --size 240 --out loom.avi
+    python -m cdnf_ti.run generate dark_translating --coherence 0.2 --scatter static --out bar.avi
     python -m cdnf_ti.run generate light_translating --out frames_dir          # PNG folder
     python -m cdnf_ti.run rain clip1.mp4 clip2.mp4 --out rainy/ --seed 7      # rainy/clip1_rain.avi ...
 
@@ -26,7 +27,7 @@ from .frames import iter_grey
 from .inputs import resolve_input
 from .limits import check_drops, check_frame_size
 from .stimuli.basic import BASIC_STIMULI, basic_stimulus
-from .stimuli.incoherent import IncoherentStimulus
+from .stimuli.incoherent import SCATTERS, IncoherentStimulus
 from .stimuli.io import output_format, write_frames, write_sidecar
 from .stimuli.rain import RainParams, RainyFrames
 
@@ -52,6 +53,9 @@ def generate_main(argv: Sequence[str]) -> int:
     ap.add_argument("name", choices=BASIC_STIMULI, metavar="NAME", help=f"one of: {', '.join(BASIC_STIMULI)}")
     ap.add_argument("--coherence", type=float, default=1.0, help="coherence degree c in (0, 1] (default 1)")
     ap.add_argument("--seed", type=seed_arg, default=0, help="seed of the incoherent displacement (default 0)")
+    ap.add_argument("--scatter", choices=SCATTERS, default="flicker",
+                    help="incoherent construction: displaced dots vanish with their leaving source and reappear "
+                         "elsewhere (flicker, default), or pass to an entering source and stay put (static)")
     ap.add_argument("--size", type=int, default=None,
                     help="frame height = width in px (default 600); start half-size scales as size/60 "
                          "(default_start_half_size)")
@@ -79,7 +83,7 @@ def generate_main(argv: Sequence[str]) -> int:
             kw[k] = getattr(args, k)
     try:  # the stimulus classes check their parameters (coherence in (0, 1], ...)
         base = basic_stimulus(args.name, **kw)
-        stim = IncoherentStimulus(base, args.coherence, args.seed)
+        stim = IncoherentStimulus(base, args.coherence, args.seed, scatter=args.scatter)
     except (ValueError, TypeError) as e:
         raise UserError(str(e)) from None
     frames = stim.frames()
@@ -106,7 +110,7 @@ def generate_main(argv: Sequence[str]) -> int:
     sp = write_sidecar(args.out, meta)
     halt = "" if stim.halted_at is None else f", halted at frame {stim.halted_at}"
     snr = "" if rain is None else f", rain SNR {rain.snr_db:.2f} dB"
-    print(f"{args.out}: {args.name} c={args.coherence:g} seed={args.seed}, {n} frames "
+    print(f"{args.out}: {args.name} c={args.coherence:g} seed={args.seed} scatter={args.scatter}, {n} frames "
           f"{base.width}x{base.height}{halt}{snr}; sidecar {sp}")
     return 0
 

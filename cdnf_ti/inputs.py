@@ -12,7 +12,9 @@ height = width; ``start_half_size`` defaults to ``min(height, width) / 60``,
 the 600 px default), ``height``, ``width``, ``fps``,
 ``duration``, ``start_half_size``, ``end_half_size``, ``bar_width``,
 ``expansion`` (``inverse`` or ``linear``), ``object_grey``,
-``background_grey``, ``speed`` (translating bar, px/s). ``stim:grating`` is the
+``background_grey``, ``speed`` (translating bar, px/s), ``scatter`` (``flicker``
+or ``static``: how displaced dots of an incoherent stimulus behave,
+:class:`cdnf_ti.stimuli.incoherent.IncoherentStimulus`). ``stim:grating`` is the
 drifting grating (:class:`cdnf_ti.stimuli.grating.GratingStimulus`: ``size``,
 ``height``, ``width``, ``fps``, ``duration``, ``period``, ``bar_width``,
 ``speed``, ``orientation``, ``bar_grey``, ``background_grey``, ``seed``). Frames
@@ -36,7 +38,7 @@ STIM_PREFIX = "stim:"
 _INT_KEYS = ("seed", "size", "height", "width", "bar_width", "period")
 _FLOAT_KEYS = ("coherence", "fps", "duration", "start_half_size", "end_half_size", "speed", "object_grey",
                "background_grey", "bar_grey")
-_TEXT_KEYS = ("expansion", "orientation")
+_TEXT_KEYS = ("expansion", "orientation", "scatter")
 #: Generated stimuli beside the six basic ones.
 GRATING = "grating"
 
@@ -93,18 +95,19 @@ def make_stimulus(name: str, params: dict[str, Any]):
     p = dict(params)
     coherence = float(p.pop("coherence", 1.0))
     seed = int(p.pop("seed", 0))
+    scatter = p.pop("scatter", None)
     size = p.pop("size", None)
     if size is not None:
         p.setdefault("height", size)
         p.setdefault("width", size)
     if name == GRATING:
-        if "coherence" in params:
-            raise ValueError("a grating has no incoherent version (coherence applies to the basic stimuli)")
+        if "coherence" in params or scatter is not None:
+            raise ValueError("a grating has no incoherent version (coherence and scatter apply to the basic stimuli)")
         return GratingStimulus(seed=seed if "seed" in params else None, **p)
     base = basic_stimulus(name, **p)
-    if coherence == 1.0 and "coherence" not in params:
+    if coherence == 1.0 and "coherence" not in params and scatter is None:
         return base
-    return IncoherentStimulus(base, coherence, seed)
+    return IncoherentStimulus(base, coherence, seed, scatter=scatter or "flicker")
 
 
 def stimulus_label(name: str, params: dict[str, Any]) -> str:

@@ -27,6 +27,20 @@ jumps to its final frame, which every frame ``k >= h`` repeats (``halted_at =
 h``): the last frame before ``h``, i.e. the largest object the background can
 hold, still incoherent. ``c = 1`` gives the coherent stimulus exactly.
 
+Two constructions (``scatter``) differ only in what happens to a displaced
+pixel's target when its source leaves the object (a translating bar; a growing
+square never loses positions, so looming and receding are the same under both):
+
+* ``flicker`` (default): the target disappears with its source and an entering
+  source draws a new one at random, so the luminance change per frame follows
+  the coherent one, and for a moving bar scattered dots switch on and off
+  every frame;
+* ``static``: the leaving source hands its target to an entering source (in a
+  seeded random pairing), so a dot, once placed, stays where it is; only a dot
+  that the object covers is redrawn. The dots never move or flicker, and the
+  change per frame is about ``c`` times the coherent one (only the kept part
+  of the object moves).
+
 Receding is the exact time reverse of incoherent looming with the same
 coherence and seed, as the coherent receding stimulus is the time reverse of
 looming. When that looming sequence halts, the receding one therefore starts by
@@ -50,6 +64,8 @@ from .basic import BASIC_STIMULI, BasicStimulus, basic_stimulus, check_seed, tai
 
 BACKGROUND, KEPT, DISPLACED, TARGET = 0, 1, 2, 3
 BACKENDS = ("taichi", "numpy")
+#: How displaced pixels behave when their source leaves the object (see :class:`IncoherentStimulus`).
+SCATTERS = ("flicker", "static")
 
 
 def displaced_count(n_object: int, coherence: float) -> int:
@@ -88,6 +104,9 @@ class IncoherentStimulus:
         Seed of the random displacement; same seed, same frames.
     backend : {"taichi", "numpy"}
         Taichi kernels (default) or the NumPy reference for the per-pixel work.
+    scatter : {"flicker", "static"}
+        What a leaving source's target does: disappear (``flicker``, default)
+        or pass to an entering source (``static``); see the module docstring.
 
     Attributes
     ----------
@@ -112,7 +131,8 @@ class IncoherentStimulus:
         displaced pixels.
     """
 
-    def __init__(self, base: BasicStimulus, coherence: float, seed: int = 0, backend: str = "taichi"):
+    def __init__(self, base: BasicStimulus, coherence: float, seed: int = 0, backend: str = "taichi",
+                 scatter: str = "flicker"):
         if not isinstance(base, BasicStimulus):
             raise TypeError("base must be a BasicStimulus")
         coherence = float(coherence)
@@ -120,6 +140,9 @@ class IncoherentStimulus:
             raise ValueError(f"coherence must be in (0, 1], got {coherence:g}")
         if backend not in BACKENDS:
             raise ValueError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
+        if scatter not in SCATTERS:
+            raise ValueError(f"unknown scatter {scatter!r}; choose one of {', '.join(SCATTERS)}")
+        self.scatter = scatter
         self.base = base
         self.coherence = coherence
         self.seed = check_seed(seed)
@@ -128,7 +151,7 @@ class IncoherentStimulus:
         self._forward: IncoherentStimulus | None = None
         if base.motion == "receding":
             twin = BasicStimulus(**{**base.to_dict(), "name": f"{base.polarity}_looming"})
-            self._forward = IncoherentStimulus(twin, coherence, seed, backend=backend)
+            self._forward = IncoherentStimulus(twin, coherence, seed, backend=backend, scatter=scatter)
             self.object_pixels = self._forward.object_pixels[::-1].copy()
             self.halted_at = None
             self.final_frame_index = base.n_frames - 1
@@ -195,7 +218,7 @@ class IncoherentStimulus:
 
     def to_dict(self) -> dict:
         """Every parameter (for sidecars): base stimulus, coherence, seed, halting."""
-        return {"stimulus": self.name, "coherence": self.coherence, "seed": self.seed,
+        return {"stimulus": self.name, "coherence": self.coherence, "seed": self.seed, "scatter": self.scatter,
                 "halted_at": self.halted_at, "final_frame_index": self.final_frame_index,
                 "held_frames": self.held_frames,
                 "basic": self.base.to_dict()}
@@ -221,25 +244,33 @@ class IncoherentStimulus:
         """Advance the persistent state to base frame ``k`` (in place)."""
         rng = np.random.default_rng([self.seed, k])
         flat = state.reshape(-1)
+        static = self.scatter == "static"
         M = self.base.object_mask(k).reshape(-1)
         n_d = displaced_count(int(M.sum()), self.coherence)
-        covered = np.empty(0, dtype=np.int64)
-        # 1. positions that left the object: their targets disappear with them
+        orphans = np.empty(0, dtype=np.int64)  # static: targets whose source left, still shown
+        # 1. positions that left the object: their targets disappear with them (flicker)
+        #    or wait for an entering source (static)
         inside = (flat == KEPT) | (flat == DISPLACED)
         left = np.flatnonzero(inside & ~M)
         if left.size:
             left_d = left[flat[left] == DISPLACED]
             t = target_of[left_d]
-            self._set(state, t, BACKGROUND)
+            if static:
+                orphans = t
+            else:
+                self._set(state, t, BACKGROUND)
             source_of[t] = -1
             target_of[left_d] = -1
             self._set(state, left, BACKGROUND)
         # 2. targets covered by the object: redraw them below
         covered = np.flatnonzero((flat == TARGET) & M)
         if covered.size:
-            target_of[source_of[covered]] = -1
+            src = source_of[covered]
+            target_of[src[src >= 0]] = -1
             source_of[covered] = -1
             self._set(state, covered, BACKGROUND)
+            if orphans.size:
+                orphans = np.setdiff1d(orphans, covered, assume_unique=True)
         # 3. positions entering the object: displace as many as restore n_d
         # (covered targets go last: they already show the object colour, so
         # keeping them in place costs no luminance change)
@@ -259,12 +290,22 @@ class IncoherentStimulus:
             disp = np.flatnonzero(flat == DISPLACED)
             back = np.sort(rng.choice(disp, -need, replace=False))
             t = target_of[back]
-            self._set(state, t, BACKGROUND)
+            if static:
+                orphans = np.concatenate([orphans, t])
+            else:
+                self._set(state, t, BACKGROUND)
             source_of[t] = -1
             target_of[back] = -1
             self._set(state, back, KEPT)
-        # 4. a target for every displaced position without one
+        # 4. a target for every displaced position without one (static: the
+        #    orphaned targets first, so those dots stay where they are)
         lost = np.flatnonzero((flat == DISPLACED) & (target_of < 0))
+        if orphans.size:
+            handed = orphans[rng.permutation(orphans.size)][: lost.size]
+            target_of[lost[: handed.size]] = handed
+            source_of[handed] = lost[: handed.size]
+            self._set(state, np.sort(orphans[source_of[orphans] < 0]), BACKGROUND)  # more dots than sources
+            lost = lost[handed.size:]
         if lost.size:
             free = np.flatnonzero(flat == BACKGROUND)
             tg = free[rng.choice(free.size, lost.size, replace=False)]
@@ -313,7 +354,7 @@ class IncoherentStimulus:
 
 
 def incoherent_stimulus(name: str, coherence: float, seed: int = 0, backend: str = "taichi",
-                        **basic_kwargs) -> IncoherentStimulus:
+                        scatter: str = "flicker", **basic_kwargs) -> IncoherentStimulus:
     """Build an :class:`IncoherentStimulus` from a basic stimulus name and keyword overrides.
 
     Examples
@@ -321,7 +362,8 @@ def incoherent_stimulus(name: str, coherence: float, seed: int = 0, backend: str
     >>> s = incoherent_stimulus("dark_looming", 0.2, seed=1, height=120, width=120, start_half_size=2)
     >>> frame0 = next(iter(s))   # float32 (120, 120)
     """
-    return IncoherentStimulus(basic_stimulus(name, **basic_kwargs), coherence, seed, backend=backend)
+    return IncoherentStimulus(basic_stimulus(name, **basic_kwargs), coherence, seed, backend=backend,
+                              scatter=scatter)
 
 
 def luminance_change(frames) -> np.ndarray:

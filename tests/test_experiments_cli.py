@@ -1,10 +1,12 @@
 """``python -m cdnf_ti.run dataset`` / ``experiment``: outputs, exit codes, one-line errors."""
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from cdnf_ti.experiments.synthetic import make_synthetic_dataset
@@ -77,6 +79,24 @@ def test_experiment_coherence_writes_the_sweep_table(tmp_path, capsys):
     assert rc == 0
     csv_text = (tmp_path / "coherence.csv").read_text().splitlines()
     assert csv_text[0] == "stimulus,model,coherence,alert,first_alert,max_output" and len(csv_text) == 3
+
+
+def test_experiment_coherence_static_scatter_runs_the_static_construction(tmp_path, capsys):
+    rc = main(["experiment", "coherence", "--models", "cdnf", "--size", "48", "--coherences", "0.5",
+               "--stimuli", "dark_translating", "--scatter", "static", "--out", str(tmp_path), "--workers", "0",
+               "--no-progress", "--no-figures"])
+    assert rc == 0
+    meta = json.loads((tmp_path / "coherence.json").read_text())
+    assert meta["scatter"] == "static"
+    assert "static dots" in (tmp_path / "coherence.md").read_text()
+    from cdnf_ti import CDNF
+    from cdnf_ti.models.base import Trace
+    from cdnf_ti.stimuli.incoherent import incoherent_stimulus
+
+    saved = Trace.from_csv(tmp_path / "traces" / "dark_translating_c050_static.cdnf.csv", "cdnf")
+    stim = incoherent_stimulus("dark_translating", 0.5, 0, scatter="static", height=48, width=48)
+    ref = CDNF(fps=stim.fps).run(stim.frames())
+    np.testing.assert_allclose(saved.output, ref.output, atol=1e-6)
 
 
 def test_experiment_coherence_rejects_bad_coherence(tmp_path, capsys):

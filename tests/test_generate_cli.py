@@ -31,6 +31,24 @@ def test_generate_writes_lossless_avi_and_sidecar_with_every_parameter(tmp_path,
     assert "loom.avi" in capsys.readouterr().out
 
 
+def test_generate_static_scatter_writes_the_static_construction(tmp_path, capsys):
+    out = tmp_path / "bar.avi"
+    rc = main(["generate", "dark_translating", "--coherence", "0.2", "--scatter", "static", "--size", "48",
+               "--out", str(out), "--no-progress"])
+    assert rc == 0
+    meta = json.loads((tmp_path / "bar.json").read_text())
+    assert meta["scatter"] == "static" and meta["coherence"] == 0.2
+    ref = incoherent_stimulus("dark_translating", 0.2, 0, scatter="static", height=48, width=48)
+    for f, g in zip(ref.frames(), read_frames(out)):
+        np.testing.assert_array_equal(f, g)
+
+
+def test_generate_unknown_scatter_exits_2(tmp_path):
+    with pytest.raises(SystemExit) as e:
+        main(["generate", "dark_translating", "--scatter", "wobble", "--out", str(tmp_path / "x.avi")])
+    assert e.value.code == 2
+
+
 def test_generate_with_rain_to_png_folder_records_rain_and_snr(tmp_path):
     out = tmp_path / "trans"
     rc = main(["generate", "light_translating", "--coherence", "0.5", "--size", "48", "--rain",

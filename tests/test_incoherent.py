@@ -230,3 +230,73 @@ def test_cdnf_response_to_incoherent_translating_stays_below_its_incoherent_loom
     _, bar = _cdnf_alerts(small(name, 0.2, size=96))
     _, loom = _cdnf_alerts(small("dark_looming", 0.2, size=96))
     assert bar.output.max() < loom.output.max() - 0.01
+
+
+# -- the static construction (scatter="static") ------------------------------------------------
+
+
+def small_static(name: str, c: float, seed: int = 0, backend: str = "taichi", size: int = SIZE):
+    return incoherent_stimulus(name, c, seed, backend=backend, scatter="static", height=size, width=size)
+
+
+@pytest.mark.parametrize("name", BASIC_STIMULI)
+@pytest.mark.parametrize("c", [0.8, 0.3])
+def test_static_keeps_the_object_pixel_count_and_the_coherence(name, c):
+    s = small_static(name, c, seed=1)
+    for k, (f, b) in enumerate(zip(s.frames(), s.base.frames())):
+        if k not in s.moving_frames:
+            continue
+        mask = s.base.object_mask(k)
+        assert n_object_coloured(f, s.object_value) == n_object_coloured(b, s.object_value), k
+        assert np.count_nonzero(f[mask] == s.object_value) == mask.sum() - displaced_count(int(mask.sum()), c)
+
+
+@pytest.mark.parametrize("name", BASIC_STIMULI)
+def test_static_taichi_kernels_match_numpy_reference(name):
+    for c in (0.6, 0.1):
+        tk, ref = small_static(name, c, seed=3), small_static(name, c, seed=3, backend="numpy")
+        for f, g in zip(tk.frames(), ref.frames()):
+            np.testing.assert_array_equal(f, g)
+
+
+@pytest.mark.parametrize("name", ["dark_looming", "light_receding"])
+def test_static_equals_flicker_when_no_position_leaves_the_object(name):
+    """A growing (or, reversed, shrinking) square never loses a position, so nothing is handed over."""
+    for f, g in zip(small_static(name, 0.4, seed=2), small(name, 0.4, seed=2)):
+        np.testing.assert_array_equal(f, g)
+
+
+def test_static_dots_outside_the_bar_never_vanish_and_appear_only_to_replace_covered_ones():
+    s = small_static("dark_translating", 0.5, seed=4)
+    frames = list(s)
+    handed = 0
+    for k in range(1, s.n_frames):
+        m0, m1 = s.base.object_mask(k - 1), s.base.object_mask(k)
+        dots0 = ~m0 & (frames[k - 1] == s.object_value)
+        dots1 = ~m1 & (frames[k] == s.object_value)
+        assert not np.any(dots0 & ~m1 & ~dots1), k  # no dot switches off unless the bar covers it
+        covered = np.count_nonzero(dots0 & m1)
+        appeared = np.count_nonzero(dots1 & ~dots0)
+        assert appeared <= covered, k
+        handed += np.count_nonzero(dots0 & dots1)
+    assert handed > 0
+
+
+def test_flicker_dots_do_switch_off_outside_the_bar():
+    s = small("dark_translating", 0.5, seed=4)
+    frames = list(s)
+    off = sum(np.count_nonzero(~s.base.object_mask(k - 1) & (frames[k - 1] == s.object_value)
+                               & ~s.base.object_mask(k) & (frames[k] != s.object_value))
+              for k in range(1, s.n_frames))
+    assert off > 0
+
+
+@pytest.mark.parametrize("c", [0.8, 0.5, 0.2])
+def test_static_translating_changes_about_c_of_the_coherent_luminance(c):
+    m = luminance_change_match(small_static("light_translating", c, seed=0, size=96))
+    assert abs(m["ratio"] - c) < 0.1, m
+
+
+def test_unknown_scatter_is_rejected():
+    with pytest.raises(ValueError, match="scatter"):
+        incoherent_stimulus("dark_looming", 0.5, scatter="wobble", height=32, width=32)

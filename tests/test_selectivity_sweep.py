@@ -30,6 +30,16 @@ def test_grid_covers_every_class_polarity_and_parameter(which):
     assert len({p.spec + (p.cls, p.polarity) for p in pts}) == len(pts)  # no duplicate stimulus
 
 
+@pytest.mark.parametrize("which", ["quick", "full"])
+def test_incoherent_translating_rows_come_with_flickering_and_static_dots(which):
+    pts = [p for p in grid(which) if p.cls == "translating" and "coherence" in p.kwargs]
+    flicker = {(p.polarity, p.value) for p in pts if p.kwargs.get("scatter", "flicker") == "flicker"}
+    static = {(p.polarity, p.value) for p in pts if p.kwargs.get("scatter") == "static"}
+    assert flicker and flicker == static
+    for p in pts:
+        assert make_grid_stimulus(p).scatter == p.kwargs.get("scatter", "flicker")
+
+
 def test_full_grid_spans_the_issues_ranges():
     pts = grid("full")
     sizes = {p.kwargs.get("height") for p in pts}

@@ -101,6 +101,17 @@ def test_resolve_input_generates_named_stimulus():
     np.testing.assert_array_equal(next(iter(src)), next(iter(src)))
 
 
+def test_resolve_input_static_scatter_builds_the_static_construction():
+    src = resolve_input("stim:dark_translating?coherence=0.5&seed=2&size=40&scatter=static")
+    assert src.stimulus.scatter == "static" and "scatterstatic" in src.name
+    ref = incoherent_stimulus("dark_translating", 0.5, 2, scatter="static", height=40, width=40)
+    flicker = incoherent_stimulus("dark_translating", 0.5, 2, height=40, width=40)
+    frames = list(src)
+    for f, g in zip(frames, ref.frames()):
+        np.testing.assert_array_equal(f, g)
+    assert any(not np.array_equal(f, g) for f, g in zip(frames, flicker.frames()))
+
+
 def test_resolve_input_plain_stimulus_is_the_basic_one():
     from conftest import small_stimulus
 
@@ -123,6 +134,8 @@ def test_resolve_input_passes_paths_to_open_source(tmp_path):
     ("stim:dark_looming?spin=3", "unknown parameter"),
     ("stim:dark_looming?seed=x", "not a number"),
     ("stim:dark_looming?coherence=0", "coherence"),
+    ("stim:dark_looming?coherence=0.5&scatter=wobble", "scatter"),
+    ("stim:grating?scatter=static", "scatter"),
 ])
 def test_bad_stimulus_specs_give_one_line_errors(spec, match):
     with pytest.raises(InputError, match=match) as e:

@@ -43,6 +43,8 @@ class StimulusTask:
     out : str
         Folder for the trace CSV (``traces/<stimulus>[_c<coh>].<model>.csv``).
     backend, arch : str
+    scatter : {"flicker", "static"}
+        Incoherent construction (:class:`cdnf_ti.stimuli.incoherent.IncoherentStimulus`).
     """
 
     model: str
@@ -53,19 +55,22 @@ class StimulusTask:
     out: str
     backend: str = "taichi"
     arch: str = "cpu"
+    scatter: str = "flicker"
 
     @property
     def trace_file(self) -> Path:
         tag = self.stimulus if self.coherence is None else f"{self.stimulus}_c{round(self.coherence * 100):03d}"
+        if self.coherence is not None and self.scatter != "flicker":
+            tag += f"_{self.scatter}"
         return Path(self.out) / "traces" / f"{tag}.{self.model}.csv"
 
 
-def make_stimulus(name: str, size: int, coherence: float | None = None, seed: int = 0):
+def make_stimulus(name: str, size: int, coherence: float | None = None, seed: int = 0, scatter: str = "flicker"):
     """A basic (coherence None) or incoherent stimulus, scaled to ``size`` x ``size`` px."""
     kw = dict(height=size, width=size)  # start half-size: default_start_half_size(size)
     if coherence is None:
         return basic_stimulus(name, **kw)
-    return incoherent_stimulus(name, coherence, seed=seed, **kw)
+    return incoherent_stimulus(name, coherence, seed=seed, scatter=scatter, **kw)
 
 
 def _frames_of(stim):
@@ -76,7 +81,7 @@ def run_stimulus_task(task: StimulusTask) -> dict:
     """Run one model on one stimulus; save the trace; return a summary record."""
     if task.backend == "taichi":
         init_worker(task.arch)
-    stim = make_stimulus(task.stimulus, task.size, task.coherence, task.seed)
+    stim = make_stimulus(task.stimulus, task.size, task.coherence, task.seed, task.scatter)
     fps = float(getattr(stim, "fps", 30.0))
     model = create_model(task.model, backend=task.backend, arch=task.arch, fps=fps)
     with warnings.catch_warnings():
@@ -89,8 +94,9 @@ def run_stimulus_task(task: StimulusTask) -> dict:
             "threshold": tr.threshold, "converged": bool(tr.converged.all()), "seconds": round(tr.seconds, 3)}
 
 
-def _snapshots(name: str, size: int, coherence: float | None, seed: int, k: Sequence[float]) -> list[np.ndarray]:
-    frames = [np.asarray(f, dtype=np.float32) for f in _frames_of(make_stimulus(name, size, coherence, seed))]
+def _snapshots(name: str, size: int, coherence: float | None, seed: int, k: Sequence[float],
+               scatter: str = "flicker") -> list[np.ndarray]:
+    frames = [np.asarray(f, dtype=np.float32) for f in _frames_of(make_stimulus(name, size, coherence, seed, scatter))]
     n = len(frames)
     return [frames[min(n - 1, int(round(q * (n - 1))))] for q in k]
 
@@ -139,8 +145,11 @@ def table1(models: Sequence[str], out: str | Path, size: int = 160, seed: int = 
 def coherence_sweep(models: Sequence[str], out: str | Path, size: int = 160,
                     coherences: Sequence[float] = COHERENCES, seed: int = 0, workers: int | None = None,
                     scheduler: Any = None, backend: str = "taichi", arch: str = "cpu", progress: bool = True,
-                    figures: bool = True, stimuli: Sequence[str] | None = None) -> dict:
+                    figures: bool = True, stimuli: Sequence[str] | None = None, scatter: str = "flicker") -> dict:
     """Fig. 4: each model on each incoherent stimulus at each coherence; writes coherence.md/json/csv + figure.
+
+    ``scatter`` picks the incoherent construction (``flicker`` or ``static``,
+    :class:`cdnf_ti.stimuli.incoherent.IncoherentStimulus`).
 
     Returns
     -------
@@ -152,8 +161,8 @@ def coherence_sweep(models: Sequence[str], out: str | Path, size: int = 160,
             raise ValueError(f"coherence must be in (0, 1], got {c}")
     stimuli = list(stimuli or BASIC_STIMULI)
     out = Path(out)
-    make_stimulus(stimuli[0], 16, coherences[0], seed)  # fail early if incoherent stimuli are missing
-    tasks = [StimulusTask(m, s, size, float(c), seed, str(out), backend, arch)
+    make_stimulus(stimuli[0], 16, coherences[0], seed, scatter)  # fail early: missing stimuli, bad scatter
+    tasks = [StimulusTask(m, s, size, float(c), seed, str(out), backend, arch, scatter)
              for s in stimuli for c in coherences for m in models]
     recs = _run(tasks, workers, scheduler, arch, progress, "coherence")
     table: dict[str, dict[str, dict[float, dict]]] = {s: {m: {} for m in models} for s in stimuli}
@@ -168,23 +177,25 @@ def coherence_sweep(models: Sequence[str], out: str | Path, size: int = 160,
                 rows.append(f"{s},{m},{c:g},{'' if r.get('alert') is None else r['alert']},"
                             f"{'' if fa is None else fa},{r.get('max_output', '')}")
     atomic_write_text(out / "coherence.csv", "\n".join(rows) + "\n")
-    atomic_write_json(out / "coherence.json", {"size": size, "seed": seed, "coherences": list(coherences),
+    atomic_write_json(out / "coherence.json", {"size": size, "seed": seed, "scatter": scatter,
+                                               "coherences": list(coherences),
                                                "table": {s: {m: {f"{c:g}": v for c, v in d.items()}
                                                              for m, d in t.items()} for s, t in table.items()}})
-    atomic_write_text(out / "coherence.md", coherence_markdown(table, coherences, size))
+    atomic_write_text(out / "coherence.md", coherence_markdown(table, coherences, size, scatter))
     if figures:
         lo = min(coherences)
-        snaps = {s: {c: _snapshots(s, size, c, seed, (0.8,))[0] for c in sorted({lo, max(coherences)})}
+        snaps = {s: {c: _snapshots(s, size, c, seed, (0.8,), scatter)[0] for c in sorted({lo, max(coherences)})}
                  for s in stimuli}
         plot_coherence(out / "figures" / "coherence_sweep.png", table, coherences, snaps, PAPER_LABELS)
     return table
 
 
-def coherence_markdown(table: dict, coherences: Sequence[float], size: int | None = None) -> str:
+def coherence_markdown(table: dict, coherences: Sequence[float], size: int | None = None,
+                       scatter: str = "flicker") -> str:
     """Markdown: a row per stimulus x model, a column per coherence; 1 = alerts."""
     models = list(dict.fromkeys(m for s in table for m in table[s]))
     head = "| Stimulus | Model | " + " | ".join(f"{100 * c:.0f}%" for c in coherences) + " |"
-    lines = [f"# Coherence sweep (paper Fig. 4){'' if size is None else f', {size}x{size} px'}", "",
+    lines = [f"# Coherence sweep (paper Fig. 4){'' if size is None else f', {size}x{size} px'}, {scatter} dots", "",
              "1 = the model alerts at that coherence degree (fraction of object pixels kept in place).", "",
              head, "|---|---|" + "---|" * len(coherences)]
     for s in table:

@@ -24,6 +24,7 @@ from ..errors import InputError, UserError
 from ..limits import check_frame_size
 from ..render import render_dataset
 from ..stimuli.basic import BASIC_STIMULI
+from ..stimuli.incoherent import SCATTERS
 from . import builtin
 from .dataset import run_dataset
 from .paramsweep import run_param_sweep
@@ -195,6 +196,9 @@ def experiment_main(argv: Sequence[str]) -> int:
     p2.add_argument("--coherences", default=",".join(f"{c:g}" for c in builtin.COHERENCES),
                     help="comma-separated coherence degrees in (0, 1] (default: %(default)s)")
     p2.add_argument("--stimuli", default=None, help="comma-separated basic stimuli (default: all six)")
+    p2.add_argument("--scatter", choices=SCATTERS, default="flicker",
+                    help="incoherent construction: displaced dots vanish with their leaving source and reappear "
+                         "elsewhere (flicker, default) or pass to an entering source and stay put (static)")
     p4 = sub.add_parser("selectivity", help="every model against Table I over a grid of stimulus settings "
                                              "(sizes, speeds, grey levels, gratings, coherences)")
     p4.add_argument("--out", default="cdnf_experiments/selectivity", help="output folder (default: %(default)s)")
@@ -275,8 +279,8 @@ def _stimulus_experiment(args, models, builtin) -> int:
             bad = [s for s in stimuli if s not in BASIC_STIMULI]
             if bad:
                 raise UserError(f"unknown stimulus {bad[0]!r}; choose from {', '.join(BASIC_STIMULI)}")
-        table = builtin.coherence_sweep(models, args.out, coherences=coh, stimuli=stimuli, **kw)
-        print(builtin.coherence_markdown(table, coh, args.size))
+        table = builtin.coherence_sweep(models, args.out, coherences=coh, stimuli=stimuli, scatter=args.scatter, **kw)
+        print(builtin.coherence_markdown(table, coh, args.size, args.scatter))
         errs = [r for t in table.values() for d in t.values() for r in d.values() if r.get("error")]
         for r in errs:
             print(f"error: {r['stimulus']} c={r['coherence']:g} [{r['model']}]: {r['error']}", file=sys.stderr)

@@ -17,7 +17,11 @@ half-size 45% of the side, 1/t expansion, black/white):
 * drifting grating (dark bars on light, light bars on dark): frame size,
   frame rate, grey levels, period, speed, orientation; expected: no alert
   (nothing approaches), for every model;
-* incoherent looming/receding/translating at a few coherences (base setting);
+* incoherent looming/receding/translating at a few coherences (base setting),
+  with flickering dots (parameter ``coherence``); translating also with static
+  dots (``coherence, static dots``: a leaving source hands its dot to an
+  entering one). A growing or shrinking square never loses a position, so its
+  frames are the same under both constructions and it is run once;
 * named cases (``full``): settings other labs use, e.g. a light square
   receding from 550 px to 3 px over 50 frames at 600 px.
 
@@ -59,6 +63,8 @@ CLASSES = ("looming", "receding", "translating", "grating")
 #: Grey levels (object, background) of the dark polarity; light swaps them.
 CONTRASTS = {"full": (0.0, 1.0), "mid": (0.25, 0.75), "low": (0.4, 0.6)}
 GRID_SIZES = ("quick", "full")
+#: Grid parameter of the incoherent rows built with static dots.
+STATIC_COHERENCE = "coherence, static dots"
 
 
 @dataclass(frozen=True)
@@ -198,6 +204,9 @@ def grid(which: str = "quick", coherences: Sequence[float] | None = None) -> lis
         for pol in ("dark", "light"):
             for c in coherences:
                 pts.append(_point(cls, pol, "coherence", f"{c:g}", **base, coherence=float(c)))
+                if cls == "translating":
+                    pts.append(_point(cls, pol, STATIC_COHERENCE, f"{c:g}", **base, coherence=float(c),
+                                      scatter="static"))
     if full:
         # Another lab's setting (issue 11): 600 px, 30 fps, 3 px <-> 550 px over 50 frames.
         for cls in ("looming", "receding"):
@@ -213,12 +222,13 @@ def make_grid_stimulus(point: GridPoint, seed: int = 0):
     """The stimulus of a grid point (a frame generator with ``fps`` and ``n_frames``)."""
     kw = point.kwargs
     coherence = kw.pop("coherence", None)
+    scatter = kw.pop("scatter", "flicker")
     if point.cls == "grating":
         return GratingStimulus(seed=seed, **kw)
     base = basic_stimulus(point.stimulus, **kw)
     if coherence is None:
         return base
-    return IncoherentStimulus(base, coherence, seed)
+    return IncoherentStimulus(base, coherence, seed, scatter=scatter)
 
 
 @dataclass(frozen=True)
@@ -375,7 +385,8 @@ def selectivity_sweep(models: Sequence[str], out: str | Path, which: str = "quic
         p = t.point
         r = r or {}
         exp = p.expected(t.model)
-        rows.append({"model": t.model, "class": ("incoherent " if p.parameter == "coherence" else "") + p.cls,
+        incoherent = p.parameter in ("coherence", STATIC_COHERENCE)
+        rows.append({"model": t.model, "class": ("incoherent " if incoherent else "") + p.cls,
                      "polarity": p.polarity, "stimulus": p.stimulus, "parameter": p.parameter, "value": p.value,
                      "expected": exp, "alert": r.get("alert"), "first_alert": r.get("first_alert"),
                      "frames": r.get("frames"), "max_output": r.get("max_output"), "error": r.get("error"),
