@@ -142,6 +142,38 @@ def test_sweep_reports_scores_per_setting_and_marks_in_sample(dataset, tmp_path)
     assert len(run.rows) == 2
 
 
+def test_sweep_reports_nested_cross_validation_beside_the_per_setting_rows(dataset, tmp_path):
+    """The command of the issue: a 2 x 2 grid writes ``nested_cv`` (accuracy as a fraction, the
+    settings chosen) into the JSON summary and a "nested" section into the Markdown and HTML."""
+    from cdnf_ti.experiments.nested import nested_cross_validation, tables_from_first_alerts
+    from cdnf_ti.run import main
+
+    out = tmp_path / "n"
+    rc = main(["experiment", "sweep", str(dataset), "--model", "cdnf", "--param", "h=0.1,0.2", "--param",
+               "alpha_off=0.5,0.7", "--out", str(out), "--workers", "0", "--no-progress", "--no-figures"])
+    assert rc == 0
+    data = json.loads((out / "param_sweep.json").read_text())
+    nested = data["nested_cv"]
+    assert 0.0 <= nested["accuracy"] <= 1.0 and nested["ci_lo"] <= nested["accuracy"] <= nested["ci_hi"]
+    assert sum(nested["chosen"].values()) == nested["folds"] == 3
+    assert set(nested["chosen"]) <= {r["setting"] for r in data["rows"]}
+    assert 0.0 <= nested["before_contact"]["accuracy"] <= 1.0
+    md = (out / "param_sweep.md").read_text()
+    assert "Nested cross-validation" in md and "nested CV accuracy" in md
+    assert "nested" in (out / "report.html").read_text().lower()
+    # the same figure, recomputed from the saved traces through the pure functions
+    from cdnf_ti.experiments.labels import read_labels
+    from cdnf_ti.experiments.paramsweep import evaluate
+    from cdnf_ti.experiments.scoring import Padding
+
+    labels = read_labels(dataset / "labels.csv")
+    _t, _a, settings = build_grid("cdnf", ["h=0.1,0.2", "alpha_off=0.5,0.7"])
+    alerts: dict = {}
+    evaluate(out, "cdnf", settings, ["clean"], labels, Padding(), alerts=alerts)
+    clips, tables = tables_from_first_alerts(alerts["clean"], {lab.clip: lab for lab in labels})
+    assert nested_cross_validation(tables, clips).accuracy == nested["accuracy"]
+
+
 def test_progress_lines_name_the_clip_the_setting_and_the_condition():
     from cdnf_ti.experiments.paramsweep import SweepTask, describe_task
 

@@ -16,6 +16,10 @@
   clip-level ROC AUC over the alert level, leave-one-out (or k-fold)
   cross-validated accuracy with the alert level chosen on the other folds, and
   the best in-sample accuracy (marked as such).
+* Over the whole grid: nested cross-validated accuracy, with the setting and
+  the alert level both chosen on the other folds (:mod:`.nested`), with a
+  bootstrap interval and how often each setting was chosen; the same for
+  before-contact hits only.
 
 Output: ``OUT/param_sweep.csv``, ``OUT/param_sweep.json``, ``OUT/param_sweep.md``,
 ``OUT/figures/param_sweep_*.png`` and ``OUT/report.html``.
@@ -46,6 +50,7 @@ from ..stimuli.rain import RainyFrames
 from .clipscores import choose_level, correctness_matrix, cross_validated_accuracy, roc
 from .labels import read_labels, validate_dataset
 from .layout import RAIN_CHOICES, fingerprint, load_meta, rain_seed, report_stale, trace_path
+from .nested import sweep_nested_cv
 from .parallel import TaskFailed, map_tasks
 from .scoring import Padding, score_clip
 from .sweep import sweep_first_alerts, sweep_spec
@@ -266,6 +271,7 @@ class ParamSweepRun:
     ran: int = 0
     skipped: int = 0
     errors: list = dataclasses.field(default_factory=list)
+    nested: dict = dataclasses.field(default_factory=dict)
 
 
 def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | None, out: str | os.PathLike,
@@ -354,15 +360,22 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
             errors.append(res)
         else:
             ran += 1
-    rows = evaluate(out, name, settings, conditions, labels, padding, folds, seed)
-    run = ParamSweepRun(name, axes, settings, conditions, rows, records, out, ran, skipped, errors)
+    alerts: dict = {}
+    rows = evaluate(out, name, settings, conditions, labels, padding, folds, seed, alerts=alerts)
+    labs = {lab.clip: lab for lab in labels}
+    nested = sweep_nested_cv(alerts, labs, {c: before_contact(lab) for c, lab in labs.items()}, padding, folds, seed)
+    run = ParamSweepRun(name, axes, settings, conditions, rows, records, out, ran, skipped, errors, nested)
     write_param_sweep_reports(run, labels, padding, folds, seed, figures=figures, html=html)
     return run
 
 
 def evaluate(out: Path, model: str, settings: Sequence[dict], conditions: Sequence[str], labels, padding,
-             folds: int = 0, seed: int = 0) -> list[dict]:
+             folds: int = 0, seed: int = 0, alerts: dict | None = None) -> list[dict]:
     """Score every setting x condition from the saved traces.
+
+    ``alerts``, when given, receives ``alerts[condition][setting key] =
+    (first alerts per clip and level, levels, the setting's own level)`` for
+    :func:`cdnf_ti.experiments.nested.sweep_nested_cv`.
 
     Returns
     -------
@@ -402,6 +415,8 @@ def evaluate(out: Path, model: str, settings: Sequence[dict], conditions: Sequen
             spec = dataclasses.replace(spec, values=tuple(levels))
             default = setting_default_level(spec, s)
             fas = {c: sweep_first_alerts(spec, tr) for c, tr in traces.items()}
+            if alerts is not None:
+                alerts.setdefault(cond, {})[key] = (fas, levels, default)
             own = [score_clip(tr.first_alert, labs[c], 30.0, padding).outcome in ("TP", "TN")
                    for c, tr in traces.items()]
             r = roc(fas, labs, levels, padding)

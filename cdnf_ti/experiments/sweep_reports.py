@@ -12,6 +12,7 @@ from ..models import get_model_class
 from .clipscores import IN_SAMPLE_NOTE, never_alerts_accuracy
 from .figures import _plt, save_figure
 from .htmlreport import Page, markdown_table
+from .nested import NESTED_MEANING
 from .tables import csv_text, pct
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -42,6 +43,35 @@ def table_rows(run: "ParamSweepRun") -> tuple[list[str], list[list]]:
                        "" if r.get("best_in_sample_level") is None else f"{r['best_in_sample_level']:.4g}",
                        f"{pct(r.get('accuracy_pre_contact'))} / {_f(r.get('auc_pre_contact'))} / "
                        f"{pct(r.get('cv_accuracy_pre_contact'))}"])
+    return header, rows
+
+
+def _ci(d: dict) -> str:
+    if not d or d.get("accuracy") is None:
+        return "n/a"
+    return f"{pct(d['accuracy'])} [{100 * d['ci_lo']:.1f}, {100 * d['ci_hi']:.1f}]"
+
+
+def _chosen(d: dict) -> str:
+    folds = d.get("folds") or 0
+    return "; ".join(f"{k}: {v}/{folds}" for k, v in (d.get("chosen") or {}).items()) or "n/a"
+
+
+def nested_rows(run: "ParamSweepRun") -> tuple[list[str], list[list]]:
+    """Header and rows of the nested cross-validation table: per condition, all hits and before-contact hits,
+    next to the best per-setting figures (in-sample picks) for comparison."""
+    header = ["condition", "scoring", "nested CV accuracy [bootstrap 95% CI]", "setting chosen (outer folds)",
+              "best per-setting accuracy (in-sample pick)", "best per-setting CV accuracy (in-sample pick)"]
+    rows = []
+    by_cond = (run.nested or {}).get("by_condition") or {}
+    for cond, d in by_cond.items():
+        mine = [r for r in run.rows if r["condition"] == cond and r.get("accuracy") is not None]
+        for label, res, acc_key, cv_key in (("all hits", d, "accuracy", "cv_accuracy"),
+                                            ("before-contact hits only", d.get("before_contact") or {},
+                                             "accuracy_pre_contact", "cv_accuracy_pre_contact")):
+            best = max((r[acc_key] for r in mine if r.get(acc_key) is not None), default=None)
+            best_cv = max((r[cv_key] for r in mine if r.get(cv_key) is not None), default=None)
+            rows.append([cond, label, _ci(res), _chosen(res), pct(best), pct(best_cv)])
     return header, rows
 
 
@@ -141,7 +171,8 @@ def write_param_sweep_reports(run: "ParamSweepRun", labels: Sequence, padding, f
     atomic_write_json(out / "param_sweep.json", {
         "model": run.model, "params": {a.name: list(a.values) for a in run.axes}, "conditions": run.conditions,
         "padding_frames": padding.to_dict(), "cross_validation": cv_txt, "never_alerts_accuracy": run.baseline,
-        "in_sample_note": IN_SAMPLE_NOTE, "rows": run.rows, "ran": run.ran, "reused": run.skipped,
+        "in_sample_note": IN_SAMPLE_NOTE, "nested_cv": {**(run.nested or {}), "meaning": NESTED_MEANING},
+        "rows": run.rows, "ran": run.ran, "reused": run.skipped,
         "errors": [{k: e.get(k) for k in ("clip", "condition", "key", "error")} for e in run.errors],
     })
     header, rows = table_rows(run)
@@ -167,7 +198,10 @@ def write_param_sweep_reports(run: "ParamSweepRun", labels: Sequence, padding, f
         "alert at or after contact (which warns of nothing) counts as late.",
         f"- tasks run now: {run.ran}; reused from disk: {run.skipped}; failed: {len(run.errors)}",
     ]
-    md = [f"# Parameter sweep: {run.model}", "", *intro, "", *markdown_table(header, rows), ""]
+    n_header, n_rows = nested_rows(run)
+    md = [f"# Parameter sweep: {run.model}", "", *intro, "", "## Scores per setting", "",
+          *markdown_table(header, rows), "", "## Nested cross-validation: setting and alert level chosen out of sample",
+          "", NESTED_MEANING + f" Scheme: {cv_txt}, outer and inner.", "", *markdown_table(n_header, n_rows), ""]
     if best_cv is not None:
         md += [f"Best CV accuracy: {pct(best_cv['cv_accuracy'])} at {best_cv['setting']} ({best_cv['condition']}); "
                "choosing this setting from the table is itself in-sample.", ""]
@@ -184,6 +218,9 @@ def write_param_sweep_reports(run: "ParamSweepRun", labels: Sequence, padding, f
         page.paragraph(f"Any 'best' or 'at level' column is {IN_SAMPLE_NOTE}.", note=True)
         page.heading("Scores per setting")
         page.table(header, rows)
+        page.heading("Nested cross-validation: setting and alert level chosen out of sample")
+        page.paragraph(NESTED_MEANING + f" Scheme: {cv_txt}, outer and inner.")
+        page.table(n_header, n_rows)
         if pngs:
             page.heading("Accuracy and AUC against the parameters")
             for p in pngs:
