@@ -9,6 +9,7 @@ from cdnf_ti.experiments.clipscores import (
     lead_times,
     never_alerts_accuracy,
     roc,
+    warning_shares,
 )
 from cdnf_ti.experiments.labels import ClipLabel
 
@@ -87,3 +88,25 @@ def test_hits_at_or_after_contact_are_counted_apart_from_warnings():
     assert d["hits_before_contact"] == 2 and d["hits_at_or_after_contact"] == 2
     assert d["hit_lead_median_ms"] == 200 and (d["hit_lead_min_ms"], d["hit_lead_max_ms"]) == (100, 300)
     assert d["alerts_before_contact"] == 3
+
+
+def test_warning_shares_count_collision_clips_warned_half_a_second_and_a_second_ahead():
+    """Six collision clips with a contact frame: first alerts 1.2 s (ahead of the window: an early
+    miss), 0.6 s, 0.5 s and 0.1 s before contact (hits), 33 ms after it (late) and none.
+    >= 0.5 s: 1.2, 0.6, 0.5 -> 3/6, of which 2 hits; >= 1 s: 1.2 -> 1/6, no hit. The non-collision,
+    failed and contact-less rows are not collision clips with a known contact."""
+    rows = [{"clip": "a", "outcome": "FN", "contact_frame": 50, "lead_time_ms": "1200"},
+            {"clip": "b", "outcome": "TP", "contact_frame": 50, "lead_time_ms": "600"},
+            {"clip": "c", "outcome": "TP", "contact_frame": 50, "lead_time_ms": 500.0},
+            {"clip": "d", "outcome": "TP", "contact_frame": 50, "lead_time_ms": "100"},
+            {"clip": "e", "outcome": "FN", "contact_frame": 50, "lead_time_ms": "-33.3"},
+            {"clip": "f", "outcome": "FN", "contact_frame": 50, "lead_time_ms": ""},
+            {"clip": "g", "outcome": "FP", "contact_frame": "", "lead_time_ms": ""},
+            {"clip": "h", "outcome": "", "contact_frame": 50, "lead_time_ms": "", "error": "boom"},
+            {"clip": "i", "outcome": "TP", "contact_frame": "", "lead_time_ms": ""}]
+    w = warning_shares(rows)
+    assert w["collision_clips"] == 6 and w["never_alerted"] == 1
+    assert (w["0.5"]["warned"], w["0.5"]["warned_hits"]) == (3, 2) and w["0.5"]["share"] == pytest.approx(0.5)
+    assert (w["1"]["warned"], w["1"]["warned_hits"]) == (1, 0) and w["1"]["share"] == pytest.approx(1 / 6)
+    assert w["alert_minus_contact_s"] == pytest.approx({"a": -1.2, "b": -0.6, "c": -0.5, "d": -0.1, "e": 0.0333})
+    assert w["hit"] == {"a": False, "b": True, "c": True, "d": True, "e": False}

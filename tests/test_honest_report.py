@@ -51,6 +51,32 @@ def test_summary_md_marks_in_sample_and_shows_the_baseline(run):
     assert "(in-sample)" in md and "CV accuracy" in md and "ROC AUC" in md
 
 
+def test_lead_time_shares_and_figure_are_in_the_summaries_and_the_report(run):
+    """Every model and condition reports the share of collision clips warned >= 0.5 s and >= 1 s
+    before contact, recomputed here from results.csv, and the lead-time figure is drawn and shown."""
+    import csv
+
+    _ds, r = run
+    s = json.loads((r.out / "summary.json").read_text())
+    with open(r.out / "results.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    for m in ("cdnf", "lgmd1"):
+        for c in ("clean", "rain"):
+            w = s["scores"][m][c]["warning"]
+            mine = [x for x in rows if x["model"] == m and x["condition"] == c and x["label"] == "collision"]
+            assert w["collision_clips"] == len(mine) == 2
+            for sec in (0.5, 1.0):
+                warned = [x for x in mine if x["lead_time_ms"] and float(x["lead_time_ms"]) >= 1000 * sec]
+                assert w[f"{sec:g}"]["warned"] == len(warned)
+                assert w[f"{sec:g}"]["share"] == pytest.approx(len(warned) / 2)
+    md = (r.out / "summary.md").read_text()
+    assert "## Lead time" in md and "Warned >= 0.5 s before contact" in md and "Warned >= 1 s" in md
+    assert (r.out / "figures" / "lead_times.png").stat().st_size > 5000
+    html = (r.out / "report.html").read_text()
+    assert "Warned &gt;= 1 s before contact" in html or "Warned >= 1 s before contact" in html
+    assert "First alert time relative to contact" in html
+
+
 def test_per_clip_figures_are_redrawn_after_a_labels_edit(run):
     ds, r = run
     png = r.out / "figures" / "traces_dark_looming.png"

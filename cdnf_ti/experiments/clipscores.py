@@ -15,6 +15,8 @@ frame of the model's first alert (or None) at each value of its alert level
   each fold's alert level is chosen on the other folds only (out-of-sample);
 * :func:`lead_times` -- lead time before contact of the alerts on collision
   clips, hits at or after contact counted separately;
+* :func:`warning_shares` -- the share of collision clips warned at least 0.5 s
+  and 1 s before contact, and every first alert's time relative to contact;
 * :func:`never_alerts_accuracy` -- the score of a model that never alerts.
 
 Anything chosen on the same clips it is scored on is called *in-sample*.
@@ -22,7 +24,7 @@ Anything chosen on the same clips it is scored on is called *in-sample*.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -309,6 +311,62 @@ def lead_times(rows: Sequence[Mapping]) -> LeadTimes:
             continue
         lt.add(float(v), r.get("outcome") == "TP")
     return lt
+
+
+#: Lead times (s before contact) whose share of warned collision clips is reported.
+WARNING_SECONDS = (0.5, 1.0)
+
+
+def warning_shares(rows: Sequence[Mapping], seconds: Sequence[float] = WARNING_SECONDS) -> dict:
+    """How far ahead of contact a model warns, over the collision clips with a known contact frame.
+
+    A clip is *warned at least s seconds before contact* when its first alert
+    comes ``s`` or more before the contact frame. Whether that alert was also
+    inside the labelled window (a hit) is counted alongside: a first alert far
+    ahead of the window is scored as an early miss, so a model that alerts on
+    anything would be "warned" on every clip and score nothing.
+
+    Parameters
+    ----------
+    rows : sequence of mapping
+        Result rows of one model and condition (``label``, ``contact_frame``,
+        ``outcome``, ``lead_time_ms``, ``error``); non-collision rows, failed
+        rows and collision rows without a contact frame are skipped.
+    seconds : sequence of float
+        Lead times to report (s).
+
+    Returns
+    -------
+    dict
+        ``collision_clips`` (with a contact frame), ``never_alerted``,
+        ``alert_minus_contact_s`` (clip -> first alert time minus contact time
+        in s, negative = before contact; clips that never alerted left out),
+        ``hit`` (clip -> first alert in the window), and per ``s`` (key
+        ``f"{s:g}"``) ``{"seconds", "warned", "share", "warned_hits", "share_hits"}``:
+        clips warned at least ``s`` before contact, their share of
+        ``collision_clips``, and the same for warnings that were also hits.
+    """
+    rel: dict[str, float] = {}
+    hit: dict[str, bool] = {}
+    n = never = 0
+    for r in rows:
+        if r.get("error") or r.get("outcome") not in ("TP", "FN") or r.get("contact_frame") in (None, ""):
+            continue
+        n += 1
+        lead = r.get("lead_time_ms")
+        if lead in (None, ""):
+            never += 1
+            continue
+        rel[str(r["clip"])] = -float(lead) / 1000.0
+        hit[str(r["clip"])] = r["outcome"] == "TP"
+    out: dict[str, Any] = {"collision_clips": n, "never_alerted": never, "alert_minus_contact_s": rel,
+                           "hit": hit}
+    for s in seconds:
+        warned = [c for c, t in rel.items() if -t >= s - 1e-9]
+        hits = [c for c in warned if hit[c]]
+        out[f"{s:g}"] = {"seconds": float(s), "warned": len(warned), "share": len(warned) / n if n else None,
+                         "warned_hits": len(hits), "share_hits": len(hits) / n if n else None}
+    return out
 
 
 def pct_ci(iv: Mapping | Interval | None) -> str:

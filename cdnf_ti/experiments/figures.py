@@ -263,6 +263,39 @@ def plot_threshold_sweep(path: str | os.PathLike, rows: Sequence[Mapping], specs
     return save_figure(fig, path)
 
 
+def plot_lead_times(path: str | os.PathLike, scores: Mapping[str, Mapping[str, Mapping]]) -> Path:
+    """First alert time relative to contact on every collision clip, one row per model and condition.
+
+    Filled dots: hits (first alert inside the window); open: misses (early or
+    late). Dotted lines at 0.5 s and 1 s before contact; the right margin
+    counts the clips that never alerted and the shares warned >= 0.5 s / >= 1 s.
+    """
+    plt = _plt()
+    rows = [(m, c, d["warning"]) for m, per in scores.items() for c, d in per.items()
+            if d.get("warning") and d["warning"]["collision_clips"]]
+    fig, ax = plt.subplots(figsize=(8.2, 0.9 + 0.45 * max(1, len(rows))))
+    for k, (_m, c, w) in enumerate(rows):
+        y = len(rows) - 1 - k
+        rel, hit = w["alert_minus_contact_s"], w["hit"]
+        colour = COND_STYLE.get(c, {}).get("color", "C0")
+        for i, (clip, t) in enumerate(sorted(rel.items())):
+            dy = 0.3 * (i / max(1, len(rel) - 1) - 0.5) if len(rel) > 1 else 0.0  # clips side by side
+            ax.plot(t, y + dy, "o", ms=6, color=colour, mfc=colour if hit.get(clip) else "none", alpha=0.8)
+        n = w["collision_clips"]
+        ax.text(1.02, y, f"{w['0.5']['warned']}/{n} >= 0.5 s, {w['1']['warned']}/{n} >= 1 s, "
+                         f"{w['never_alerted']} never", transform=ax.get_yaxis_transform(), va="center", fontsize=7)
+    for x, ls, name in ((0.0, "-", "contact"), (-0.5, ":", "0.5 s"), (-1.0, ":", "1 s")):
+        ax.axvline(x, color="k", ls=ls, lw=0.9)
+        ax.text(x, 1.0, name, transform=ax.get_xaxis_transform(), ha="center", va="bottom", fontsize=7)
+    ax.set_yticks(range(len(rows)), [f"{m} {c}" for m, c, _ in reversed(rows)])
+    ax.set_xlabel("first alert time - contact time (s); negative = before contact")
+    ax.grid(axis="x", alpha=0.3)
+    ax.set_title("First alert vs contact, collision clips (filled: hit in window; open: miss)", fontsize=10,
+                 pad=14)
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
 def plot_accuracy(path: str | os.PathLike, results: Mapping[str, Mapping[str, Mapping | None]],
                   models: Sequence[str], conditions: Sequence[str]) -> Path:
     """Bars: accuracy per model and condition; diamonds: the paper's Table II."""
@@ -323,6 +356,9 @@ def dataset_figures(run: "DatasetRun", traces: Mapping, specs: Mapping, progress
         made.append(plot_threshold_sweep(figdir / "threshold_sweep.png", run.sweep, specs))
     if run.summary and run.summary.get("scores"):
         made.append(plot_roc(figdir / "roc.png", run.summary["scores"]))
+        if any(d.get("warning", {}).get("collision_clips") for per in run.summary["scores"].values()
+               for d in per.values()):
+            made.append(plot_lead_times(figdir / "lead_times.png", run.summary["scores"]))
     if run.summary:
         made.append(plot_accuracy(figdir / "accuracy.png", run.summary["results"], run.models, run.conditions))
     return made

@@ -20,6 +20,7 @@ from .clipscores import (
     never_alerts_accuracy,
     pct_ci,
     roc,
+    warning_shares,
 )
 from .figures import dataset_figures
 from .htmlreport import markdown_table
@@ -77,7 +78,9 @@ def honest_scores(run: "DatasetRun", traces: Mapping, specs: Mapping, seed: int 
         95% interval at the model's own threshold), ``roc`` (clip-level ROC over
         the alert level) and ``auc``, ``cv`` (accuracy with each fold's alert level
         chosen on the other folds), ``in_sample_best`` (best level and accuracy,
-        chosen on the scored clips: in-sample), ``lead_times`` and ``held``
+        chosen on the scored clips: in-sample), ``lead_times``, ``warning``
+        (:func:`~cdnf_ti.experiments.clipscores.warning_shares`: share of
+        collision clips warned >= 0.5 s and >= 1 s before contact) and ``held``
         (share of frames a model was held at rest, for models with such a state).
     """
     labels = {lab.clip: lab for lab in run.labels}
@@ -107,6 +110,7 @@ def honest_scores(run: "DatasetRun", traces: Mapping, specs: Mapping, seed: int 
             d["in_sample_best"] = {"level": levels[jb], "accuracy": float(cm[:, jb].mean()),
                                    "note": IN_SAMPLE_NOTE}
             d["lead_times"] = lead_times(rows).to_dict()
+            d["warning"] = warning_shares(rows)
             held = [t.diagnostics["held"] for t in tr.values() if "held" in t.diagnostics]
             if held:
                 h = np.concatenate(held)
@@ -213,6 +217,7 @@ def summary_markdown(run: "DatasetRun", summary: Mapping, specs: Mapping) -> str
                      f"({d['FN_early']}/{d['FN_late']}/{d['FN_none']}) | {d['errors']} | {pct(d['accuracy'])} | "
                      f"{'' if lt is None else f'{lt:.0f} ms'} |")
     L += scores_markdown(run, summary)
+    L += lead_time_markdown(run, summary)
     L += ["", "## First alert per clip (frame, outcome; lead time before contact)", ""]
     cols = [(m, c) for m in run.models for c in run.conditions]
     L.append("| Clip | Label | Window (padded) | Contact | " + " | ".join(f"{m} {c}" for m, c in cols) + " |")
@@ -330,6 +335,40 @@ def scores_markdown(run: "DatasetRun", summary: Mapping) -> list[str]:
          ""]
     L += markdown_table(header, rows)
     return L
+
+
+def lead_time_table(run: "DatasetRun", summary: Mapping) -> tuple[list[str], list[list[str]]]:
+    """Header and rows of the lead-time table: per model and condition, the share of collision clips warned
+    at least 0.5 s and 1 s before contact (and how many of those warnings were hits)."""
+    sc = summary.get("scores") or {}
+    header = ["Model", "Condition", "Collision clips (contact known)", "Warned >= 0.5 s before contact (hits)",
+              "Warned >= 1 s before contact (hits)", "First alert at or after contact", "Never alerted",
+              "Median first alert vs contact"]
+    rows: list[list[str]] = []
+    for m in run.models:
+        for c in run.conditions:
+            w = ((sc.get(m) or {}).get(c) or {}).get("warning")
+            if not w or not w["collision_clips"]:
+                continue
+            n = w["collision_clips"]
+            rel = list(w["alert_minus_contact_s"].values())
+            share = [f"{w[k]['warned']}/{n} = {pct(w[k]['share'])} ({w[k]['warned_hits']})" for k in ("0.5", "1")]
+            rows.append([m, c, str(n), *share, str(sum(1 for t in rel if t >= 0)),
+                         str(w["never_alerted"]), f"{np.median(rel):+.2f} s" if rel else "n/a"])
+    return header, rows
+
+
+def lead_time_markdown(run: "DatasetRun", summary: Mapping) -> list[str]:
+    """The "lead time" section of summary.md."""
+    header, rows = lead_time_table(run, summary)
+    if not rows:
+        return []
+    return ["", "## Lead time: how long before contact each model warns", "",
+            "A collision cue is worth what it warns before impact. Per model and condition: the collision clips "
+            "whose first alert came at least 0.5 s and at least 1 s before the contact frame (in brackets: how "
+            "many of those first alerts were also inside the labelled window, i.e. hits; an alert far ahead of "
+            "the window is scored as an early miss). `figures/lead_times.png` shows every first alert's time "
+            "relative to contact.", "", *markdown_table(header, rows)]
 
 
 def write_reports(run: "DatasetRun", dataset: str, labels_path: str, seed: int, figures: bool = True,
