@@ -286,12 +286,14 @@ def plot_lead_times(path: str | os.PathLike, scores: Mapping[str, Mapping[str, M
                          f"{w['never_alerted']} never", transform=ax.get_yaxis_transform(), va="center", fontsize=7)
     for x, ls, name in ((0.0, "-", "contact"), (-0.5, ":", "0.5 s"), (-1.0, ":", "1 s")):
         ax.axvline(x, color="k", ls=ls, lw=0.9)
-        ax.text(x, 1.0, name, transform=ax.get_xaxis_transform(), ha="center", va="bottom", fontsize=7)
+        ax.text(x, 1.01, name, transform=ax.get_xaxis_transform(), ha="center", va="bottom", fontsize=7,
+                rotation=90)
     ax.set_yticks(range(len(rows)), [f"{m} {c}" for m, c, _ in reversed(rows)])
+    ax.set_ylim(-0.6, len(rows) - 0.4)
     ax.set_xlabel("first alert time - contact time (s); negative = before contact")
     ax.grid(axis="x", alpha=0.3)
     ax.set_title("First alert vs contact, collision clips (filled: hit in window; open: miss)", fontsize=10,
-                 pad=14)
+                 pad=34)
     fig.tight_layout()
     return save_figure(fig, path)
 

@@ -133,8 +133,11 @@ def plot_param_sweep(path: Path, run: "ParamSweepRun", metric: str = "cv_accurac
                 ax.legend(fontsize=7)
                 if len(names) > 1:
                     ax.set_title("mean over the other parameters", fontsize=8)
+        nested = ((getattr(run, "nested", None) or {}).get("by_condition") or {}).get(cond) or {}
+        nested_txt = (f"\nnested CV (setting and level chosen out of sample): {_ci(nested)}; before contact: "
+                      f"{_ci(nested.get('before_contact') or {})}" if nested.get("accuracy") is not None else "")
         fig.suptitle(f"{run.model} parameter sweep ({cond}; {rows[0]['clips']} clips; never-alerts baseline "
-                     f"{pct(run_baseline(run))})", fontsize=10)
+                     f"{pct(run_baseline(run))}){nested_txt}", fontsize=10)
         fig.tight_layout()
         made.append(save_figure(fig, path.parent / f"{path.stem}_{cond}.png"))
     return made
