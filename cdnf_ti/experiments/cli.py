@@ -227,7 +227,8 @@ def experiment_main(argv: Sequence[str]) -> int:
                     help="a parameter of the model and its values: NAME=START:STOP:N (N values, ends included), "
                          "NAME=V1,V2,... or NAME=V; repeat for a grid")
     p4.add_argument("--folds", type=_nonneg_int, default=0,
-                    help="cross-validation folds for the alert level (default 0: leave-one-out)")
+                    help="cross-validation folds (default 0: leave-one-out), for the alert level of each "
+                         "setting and for the nested choice of setting and level")
     p4.add_argument("--downscale", type=float, default=1.0,
                     help="resize every frame by this factor in (0, 1] (default 1: native size)")
     p4.add_argument("--no-html", action="store_true", help="do not write report.html")
