@@ -306,7 +306,7 @@ def test_unknown_scatter_is_rejected():
 def test_cdnf_is_silent_on_incoherent_translating_with_static_dots(name):
     """Paper Fig. 4: C-DNF does not respond to incoherent translating bars. With static dots it
     does not (I_v peaks at least 0.001 below the threshold), while with flickering dots it alerts
-    (pinned above): the paper's figure holds under the static construction."""
+    (the strict xfail above): the paper's figure holds under the static construction."""
     for c in (0.5, 0.2):
         alert, tr = _cdnf_alerts(small_static(name, c, size=96))
         assert not alert, c
