@@ -96,7 +96,7 @@ def test_run_models_on_generated_stimulus_with_rain(tmp_path, capsys):
     assert "rain SNR" in out and "dB" in out
     rows = list(csv.DictReader(open(tmp_path / "summary.csv")))
     assert rows[0]["clip"] == "dark_looming_c0.2_size64" and float(rows[0]["rain_snr_db"]) > 0
-    assert (tmp_path / "dark_looming_c0.2_size64.cdnf.csv").exists()
+    assert (tmp_path / "dark_looming_c0.2_size64.cdnf.rain.csv").exists()  # the condition is in the name
 
 
 def test_generate_bad_coherence_exits_2_without_traceback(tmp_path):
