@@ -172,7 +172,9 @@ def solve_fixed_point(
         without a new best residual after which it is halved.
     bounds : (a, b) or None
         Spectral bounds of the map's Jacobian: Chebyshev semi-iteration with them;
-        ``None``: the plain scheme.
+        ``None``, or bounds with ``b >= 1`` (a map the bounds cannot show to be a
+        contraction, e.g. a wide Summation kernel; Chebyshev does not apply there):
+        the plain scheme.
     steps : int
         Updates per call of ``iterate_many`` (several per kernel launch), both schemes.
     iterate_many : callable, optional
@@ -190,7 +192,7 @@ def solve_fixed_point(
     -------
     SolveReport
     """
-    if bounds is None:
+    if bounds is None or not bounds[1] < 1.0:
         return _solve_plain(iterate, n_fields, tol, max_iter, damping, min_damping, stall_patience,
                             iterate_many, steps)
     many = iterate_many if iterate_many is not None else _many(iterate, tol)

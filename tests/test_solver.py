@@ -88,3 +88,20 @@ def test_plain_scheme_in_batches_still_damps_an_oscillating_map():
                             iterate_many=_batched(it, 1e-8, []))
     assert rep.converged and rep.damping < 1.0
     assert abs(state["x"] - 1.0) < 1e-7
+
+
+def test_bounds_that_do_not_show_a_contraction_fall_back_to_the_plain_scheme():
+    """A Jacobian bound b >= 1 (a wide Summation kernel) leaves Chebyshev inapplicable: the plain, damped
+    scheme solves it, as the paper's scheme does, instead of refusing the parameters."""
+    from cdnf_ti.solver import solve_fixed_point
+
+    u = np.zeros(3)
+
+    def iterate(lam, mom=0.0):
+        new = 0.5 * np.tanh(u) + 0.1
+        r = float(np.abs(new - u).max())
+        u[:] = u + lam * (new - u)
+        return (r,)
+
+    rep = solve_fixed_point(iterate, 1, tol=1e-9, max_iter=500, damping=1.0, bounds=(-0.5, 1.5))
+    assert rep.converged and rep.scheme == "plain"
