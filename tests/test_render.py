@@ -36,8 +36,10 @@ def test_render_writes_a_playable_mp4_with_one_frame_per_input_frame(tmp_path):
 
     n_in = resolve_input("stim:dark_looming?size=64").n_frames
     assert len(frames) == n == n_in
-    # four 64x64 panels (2 x 2) above the trace panel
-    assert (w, h) == (128, 128 + 170) and frames[0].shape == (h, w, 3)
+    from cdnf_ti.render import CBAR_W, TRACE_H
+
+    # four 64x64 panels (2 x 2), each with its colour bar on the right, above the trace panel
+    assert (w, h) == (2 * (64 + CBAR_W), 128 + TRACE_H) and frames[0].shape == (h, w, 3)
     # the fields change as the square looms: the last frame's field panels differ from the first's
     assert np.abs(frames[-1][:128].astype(int) - frames[1][:128].astype(int)).mean() > 1.0
 
