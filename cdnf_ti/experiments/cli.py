@@ -245,6 +245,7 @@ def experiment_main(argv: Sequence[str]) -> int:
     for p, name in ((p1, "table1"), (p2, "coherence")):
         add_output_option(p, default=f"cdnf_experiments/{name}")
         add_model_options(p, default_models="all")
+        add_param_options(p)
         p.add_argument("--size", type=int, default=160,
                        help="frame side in px (default: %(default)s, so that the whole experiment runs in "
                             "minutes; the paper and `demo` use 600 and the stimuli scale with the size, "
@@ -308,14 +309,16 @@ def experiment_main(argv: Sequence[str]) -> int:
     check_frame_size(args.size, args.size, n_models=1, what="--size")
     models = parse_models(args.models)
     check_model_options(args)
+    args.model_params = params_from_args(args, models)
     out = prepare_output(args.out)  # before any work
     with output_lock(out):
         return _stimulus_experiment(args, models, builtin)
 
 
 def _stimulus_experiment(args, models, builtin) -> int:
-    kw = dict(size=args.size, seed=stimulus_seed_of(args), workers=args.workers, scheduler=args.scheduler,
-              backend=args.backend, arch=args.arch, progress=not args.no_progress, figures=not args.no_figures)
+    kw = dict(size=args.size, seed=stimulus_seed_of(args), params=args.model_params, workers=args.workers,
+              scheduler=args.scheduler, backend=args.backend, arch=args.arch, progress=not args.no_progress,
+              figures=not args.no_figures)
     if args.which == "table1":
         res = builtin.table1(models, args.out, **kw)
         print(format_table1(res))
