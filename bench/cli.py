@@ -159,7 +159,8 @@ class Progress:
 
 
 #: What the bench's stand-in input is (printed when it is used).
-STANDIN_NOTE = ("input 'standin' is a generated dashcam-like clip, 426x240: a textured scene drifting and zooming "
+STANDIN_NOTE = ("input 'standin' is a generated dashcam-like clip (made at 426x240, resized to each size): a textured "
+                "scene drifting and zooming "
                 "(every pixel changes, as under camera motion) with a dark box looming in the middle; it stands in "
                 "for real footage because no --clip was given and the sample dashcam clip is not present here. "
                 "Pass --clip VIDEO to measure on your own footage")
@@ -228,7 +229,7 @@ def _child_rows(compiler: str, models: Sequence[str], n_frames: int, repeats: in
         for line in proc.stderr:  # the child's progress lines, passed on as they come
             lines.append(line.rstrip("\n"))
             if progress and line.startswith("bench ["):
-                print(f"{line.rstrip()} ({compiler})", file=sys.stderr, flush=True)
+                print(line.rstrip(), file=sys.stderr, flush=True)
         proc.wait()
         if proc.returncode != 0 or not os.path.exists(out):
             msg = ([ln for ln in lines if ln.strip()] or ["no output"])[-1]
