@@ -12,16 +12,25 @@ The option scheme: one meaning per name in every subcommand (the README's "Optio
 ``--compiler``              arch, the kernel compiler
 ``--fps N``                 frame rate of file inputs (frames/s); wherever files are read
 ``--color-order bgr|rgb``   channel order of colour ``.npy`` arrays; wherever files are read
-``--rain``                  add synthetic rain; ``--rain both`` runs clean and rainy, ``--rain off``
-                            clean only (the batch commands take the same three words)
-``--rain-drops N``          droplets per frame; ``--rain-seed S`` the rain's seed
+``--rain [on|off|both]``    synthetic rain: the flag or ``on`` rainy only, ``both`` clean and rainy,
+                            ``off`` clean only (``none``/``only``: deprecated, with a note)
+``--rain-drops N``          droplets per frame (``--drops``: deprecated); ``--rain-seed S`` the rain's seed
 ``--stimulus-seed S``       the seed of generated stimuli (incoherent dots, grid stimuli)
 ``--seed S``                the default of every seed the command has (rain and stimulus)
-``--out DIR``               always a folder (created); a movie path only where the command makes
-                            one file (``render --out FILE.mp4``, ``live --record FILE.mp4``)
+``--skip-missing``          batch runs: leave out labelled clips that have no video (default: an error)
+``--out DIR``               always a folder (created; default ``cdnf_out`` or a folder inside it,
+                            ``cdnf_experiments/<name>`` for experiments); a movie path only where the
+                            command makes one file (``render --out FILE.mp4`` with one movie,
+                            ``generate --out FILE.avi``, ``live --record FILE.mp4``)
 ``--workers N``, ``--scheduler ADDRESS``  parallel batch runs
 ``--no-progress``           hide progress bars
 ==========================  =======================================================================
+
+Each command adds the options it has with the helpers here (:func:`add_model_options`,
+:func:`add_param_options`, :func:`add_input_options`, :func:`add_rain_options`,
+:func:`add_seed_options`, :func:`add_output_option`) and reads them back with
+:func:`params_from_args`, :func:`rain_conditions`, :func:`rain_seed_of` and
+:func:`stimulus_seed_of`, so that a name has one meaning and one help text everywhere.
 
 A leaf module: ``cdnf_ti.run`` (the entry point) and the subcommand modules
 (``demo``, ``generate``, ``render``, ``experiments.cli``, ``bench.cli``) import it;
@@ -134,7 +143,7 @@ def rain_flag_argv(argv: list[str]) -> list[str]:
 
 
 def add_rain_options(ap: argparse.ArgumentParser, default: str = "off", flag: bool = True,
-                     what: str = "each input") -> None:
+                     what: str = "each input", drops: bool = True) -> None:
     """``--rain [on|off|both]``, ``--rain-drops N`` and (deprecated) ``--drops``.
 
     Parameters
@@ -143,15 +152,18 @@ def add_rain_options(ap: argparse.ArgumentParser, default: str = "off", flag: bo
         What the command does without ``--rain``.
     flag : bool
         Whether ``--rain`` is offered (``rain`` always rains: it has only the drop count).
+    drops : bool
+        Whether ``--rain-drops`` is offered (the command can set the droplet count).
     """
     if flag:
         ap.add_argument("--rain", nargs="?", const="on", default=default, type=rain_word, metavar="on|off|both",
                         help=f"synthetic rain (paper, Sec. III-A-2) on {what}, in memory: --rain or --rain on = "
                              f"rainy only, --rain both = clean and rainy, --rain off = clean only "
                              f"(default: {default})")
-    ap.add_argument("--rain-drops", type=drops_arg, default=None, metavar="N",
-                    help="rain droplets per frame (default: 500 per 426x240, scaled by the frame area)")
-    add_deprecated_alias(ap, "--drops", "--rain-drops", "rain_drops", type=drops_arg)
+    if drops:
+        ap.add_argument("--rain-drops", type=drops_arg, default=None, metavar="N",
+                        help="rain droplets per frame (default: 500 per 426x240, scaled by the frame area)")
+        add_deprecated_alias(ap, "--drops", "--rain-drops", "rain_drops", type=drops_arg)
 
 
 def rain_conditions(args: argparse.Namespace) -> tuple[str, ...]:

@@ -70,8 +70,7 @@ def _add_parallel(ap: argparse.ArgumentParser, rain: bool = False, stimulus: boo
     ap.add_argument("--no-figures", action="store_true", help="do not draw figures")
 
 
-def _add_dataset_options(ap: argparse.ArgumentParser, rain_default: str, params: bool = True,
-                         one_model: bool = False) -> None:
+def _add_dataset_options(ap: argparse.ArgumentParser, rain_default: str, one_model: bool = False) -> None:
     ap.add_argument("--labels", default=None, help="labels CSV (default: DIR/labels.csv)")
     if one_model:
         add_model_options(ap, default_models="cdnf")
@@ -81,13 +80,14 @@ def _add_dataset_options(ap: argparse.ArgumentParser, rain_default: str, params:
                 a.help = "the one model whose parameters are swept (default: cdnf)"
     else:
         add_model_options(ap, default_models="cdnf" if rain_default == "off" else "all")
-    if params:
+    if not one_model:  # (the sweep reads clips as they are and needs every labelled clip)
         add_param_options(ap)
-    add_input_options(ap)
-    add_rain_options(ap, default=rain_default, what="each clip")
-    ap.add_argument("--skip-missing", action="store_true",
-                    help="run the clips whose video exists and leave out label rows naming a missing video "
-                         "(a note lists them; default: a missing video is an error and nothing runs)")
+        add_input_options(ap)
+    add_rain_options(ap, default=rain_default, what="each clip", drops=not one_model)
+    if not one_model:
+        ap.add_argument("--skip-missing", action="store_true",
+                        help="run the clips whose video exists and leave out label rows naming a missing video "
+                             "(a note lists them; default: a missing video is an error and nothing runs)")
     ap.add_argument("--pad-before", type=_nonneg_int, default=0, metavar="N",
                     help="frames of tolerance before each window start (default 0)")
     ap.add_argument("--pad-after", type=_nonneg_int, default=0, metavar="N",
@@ -171,11 +171,6 @@ def _param_sweep(args) -> int:
     folder = Path(args.folder)
     if not folder.is_dir():
         raise InputError(folder, "dataset folder not found")
-    if args.fps is not None or args.color_order != "bgr":
-        raise UserError("experiment sweep reads clips at their own frame rate and colour order; "
-                        "--fps and --color-order are not supported here")
-    if args.skip_missing:
-        raise UserError("experiment sweep has no --skip-missing; give a labels file without the missing clips")
     run = run_param_sweep(folder, args.labels, Path(args.out), models[0], args.param,
                           rain=RAIN_ENGINE_WORD[args.rain], padding=Padding(args.pad_before, args.pad_after),
                           seed=rain_seed_of(args), folds=args.folds,
@@ -291,7 +286,7 @@ def experiment_main(argv: Sequence[str]) -> int:
     p4.add_argument("--downscale", type=float, default=1.0,
                     help="resize every frame by this factor in (0, 1] (default 1: native size)")
     p4.add_argument("--no-html", action="store_true", help="do not write report.html")
-    _add_dataset_options(p4, rain_default="off", params=False, one_model=True)
+    _add_dataset_options(p4, rain_default="off", one_model=True)
     args = ap.parse_args(list(argv))
 
     if args.which in ("sweep", "selectivity"):
