@@ -47,6 +47,7 @@ from typing import Sequence
 from .errors import UserError
 from .limits import MAX_DROPS
 from .models import MODELS, get_model_class
+from .param_options import model_params
 from .taichi_runtime import COMPILERS, check_arch, select_compiler
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
@@ -246,8 +247,6 @@ def add_param_options(ap: argparse.ArgumentParser, epsilon: bool = True) -> None
 
 def params_from_args(args: argparse.Namespace, models: Sequence[str]) -> dict:
     """``{model: params or None}`` from the options of :func:`add_param_options` (one-line errors)."""
-    from .param_options import model_params
-
     return model_params(models, getattr(args, "param", []) or [], getattr(args, "epsilon", None))
 
 

@@ -394,9 +394,13 @@ def render_main(argv: Sequence[str]) -> int:
     return EXIT_OK
 
 
-def render_dataset(run: Any, folder: str | Path, progress: bool = False) -> list[Path]:
+def render_dataset(run: Any, folder: str | Path, progress: bool = False, params: dict | None = None,
+                   fps: float | None = None, color_order: str = "bgr", backend: str = "taichi",
+                   arch: str = "cpu") -> list[Path]:
     """Field movies of every scored clip of a dataset run: ``OUT/movies/<clip>.<model>.mp4`` (clean input).
 
+    ``params`` (``{model: parameter object or None}``), ``fps`` and ``color_order`` are the run's
+    own (``--param``, ``--fps``, ``--color-order``), so a movie shows the model that was scored.
     A movie newer than its trace is kept (a rerun does not redraw it).
     """
     made = []
@@ -414,7 +418,8 @@ def render_dataset(run: Any, folder: str | Path, progress: bool = False) -> list
             if video is None:
                 continue
             window = (lab.window_start, lab.window_end) if lab.collision else None
-            render_video(video, m, movie, window=window,
-                         progress=f"movie {lab.clip} [{m}]" if progress else False)
+            render_video(video, m, movie, params=(params or {}).get(m), backend=backend, arch=arch, window=window,
+                         progress=f"movie {lab.clip} [{m}]" if progress else False, fps=fps,
+                         color_order=color_order)
             made.append(movie)
     return made

@@ -60,7 +60,7 @@ from .cli_common import (
 )
 from .errors import InputError, UserError
 from .experiments.parallel import exit_on_second_interrupt, stop_all_pools
-from .frames import iter_grey
+from .frames import IMAGE_EXTENSIONS, iter_grey
 from .inputs import resolve_input
 from .limits import check_drops, check_frame_size
 from .models import create_model
@@ -334,8 +334,6 @@ def _load(target: str) -> Callable[[Sequence[str]], int]:
 
 def _looks_like_input(path: str) -> bool:
     """Whether ``path`` (a subcommand's name) is also a file, or a folder of images, that ``run`` could read."""
-    from .frames import IMAGE_EXTENSIONS
-
     p = Path(path)
     try:
         if p.is_file():

@@ -197,6 +197,20 @@ def test_frames_smaller_than_the_widest_kernel_are_an_error(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+def test_a_dataset_clip_smaller_than_the_widest_kernel_is_an_error_row(dataset, tmp_path, capsys):
+    ds = tmp_path / "ds"
+    ds.mkdir()
+    for p in dataset.iterdir():
+        (ds / p.name).write_bytes(p.read_bytes())
+    np.save(ds / "tiny.npy", np.zeros((10, 6, 6), np.uint8))
+    with open(ds / "labels.csv", "a") as f:
+        f.write("tiny,non-collision,,,,,\n")
+    assert main(["dataset", str(ds), "--out", str(tmp_path / "o"), "--workers", "0", "--no-progress",
+                 "--no-figures"]) == 1
+    row = next(r for r in _results(tmp_path / "o") if r["clip"] == "tiny")
+    assert "widest kernel" in row["error"] and row["outcome"] == ""
+
+
 def test_the_minimum_frame_side_is_the_widest_default_kernel():
     from cdnf_ti.limits import MIN_SIDE
     from cdnf_ti.params import CDNFParams

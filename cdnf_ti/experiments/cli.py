@@ -42,6 +42,7 @@ from ..stimuli.basic import BASIC_STIMULI
 from ..stimuli.incoherent import SCATTERS
 from . import builtin
 from .dataset import run_dataset
+from .labels import drop_missing, read_labels
 from .paramsweep import run_param_sweep
 from .reports import pct, table2_markdown
 from .scoring import Padding
@@ -104,8 +105,6 @@ def _skip_missing(args, folder: Path) -> None:
     """``--skip-missing``: say which label rows name a missing video (and stop when every one does)."""
     if not getattr(args, "skip_missing", False):
         return
-    from .labels import drop_missing, read_labels
-
     labels_path = Path(args.labels) if args.labels else folder / "labels.csv"
     kept, missing = drop_missing(read_labels(labels_path), folder)
     if missing:
@@ -138,7 +137,8 @@ def _dataset(args, folder: Path, out: Path) -> int:
         print(f"error: {e['error']} [{e['model']}, {e['condition']}]", file=sys.stderr)
 
     if getattr(args, "render", False):
-        movies = render_dataset(run, folder, progress=not args.no_progress)
+        movies = render_dataset(run, folder, progress=not args.no_progress, params=params, fps=args.fps,
+                                color_order=args.color_order, backend=args.backend, arch=args.arch)
         print(f"{len(movies)} field movies in {out}/movies/", file=sys.stderr)
     if run.failed:
         print(f"{run.n_errors} of {len(run.rows)} clip x model x condition run(s) failed; see {out}/results.csv",

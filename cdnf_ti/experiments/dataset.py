@@ -25,6 +25,7 @@ from typing import Any, Callable, Sequence
 from ..atomic import atomic_write_json, output_lock, prepare_output, remove_stale_temps
 from ..errors import InputError, UserError
 from ..frames import iter_grey, open_source
+from ..limits import check_frame_size
 from ..models import create_model
 from ..models.base import NotConvergedWarning, run_models
 from ..stimuli.rain import RainParams, RainyFrames
@@ -143,6 +144,10 @@ def run_clip_task(task: ClipTask) -> list[dict]:
 
     try:
         src = open_source(task.path, fps=task.fps, color_order=task.color_order)
+        try:
+            check_frame_size(*src.shape, n_models=len(task.models), what=str(task.path))
+        except UserError as e:  # frames smaller than the widest kernel: that clip's error rows
+            raise InputError(task.path, str(e).split(": ", 1)[-1]) from None
     except InputError as e:
         return failed(task.models, e)
     records: dict[str, dict] = {}
