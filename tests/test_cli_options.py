@@ -302,3 +302,29 @@ def test_experiment_table1_applies_param(tmp_path, capsys):
                  "--out", str(tmp_path), "--workers", "0", "--no-progress", "--no-figures"]) == 0
     res = json.loads((tmp_path / "table1.json").read_text())["result"]["cdnf"]
     assert {r["alert"] for r in res.values()} == {0} and {r["threshold"] for r in res.values()} == {0.99}
+
+
+# --- bench ------------------------------------------------------------------------------------------------
+
+def test_bench_progress_is_one_line_per_finished_run_in_a_log(capsys):
+    from cdnf_ti.bench.cli import Progress
+
+    bar = Progress(2)
+    bar.update(1, "cdnf chebyshev (taichi) standin 426x240: 50.0 frames/s")
+    bar.update(1, "lgmd2 (taichi) standin 426x240: 90.0 frames/s")
+    bar.close()
+    assert capsys.readouterr().err.splitlines() == [
+        "bench [1/2] cdnf chebyshev (taichi) standin 426x240: 50.0 frames/s",
+        "bench [2/2] lgmd2 (taichi) standin 426x240: 90.0 frames/s"]
+
+
+def test_bench_explains_its_stand_in_clip(monkeypatch, capsys):
+    from cdnf_ti.bench import cli
+
+    def fake_bench(models, *a, **kw):
+        return [cli.BenchRow(m, inp, "64x48", 100.0) for m in models for inp in ("basic:dark_looming", "standin")]
+
+    monkeypatch.setattr(cli, "run_bench", fake_bench)
+    assert main(["bench", "--model", "cdnf", "--sizes", "64x48", "--no-reference"]) == 0
+    out = capsys.readouterr().out
+    assert "| standin |" in out and "input 'standin' is a generated dashcam-like clip" in out
