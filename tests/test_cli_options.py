@@ -328,3 +328,15 @@ def test_bench_explains_its_stand_in_clip(monkeypatch, capsys):
     assert main(["bench", "--model", "cdnf", "--sizes", "64x48", "--no-reference"]) == 0
     out = capsys.readouterr().out
     assert "| standin |" in out and "input 'standin' is a generated dashcam-like clip" in out
+
+
+def test_experiment_selectivity_applies_param_and_does_not_reuse_other_params(tmp_path, capsys):
+    base = ["experiment", "selectivity", "--models", "lgmd2", "--classes", "grating", "--quick", "--out",
+            str(tmp_path), "--workers", "0", "--no-progress", "--no-figures"]
+    assert main(base) in (0, 1)
+    capsys.readouterr()
+    assert main(base + ["--param", "n_ts=1"]) in (0, 1)
+    assert " 0 reused" in capsys.readouterr().err
+    rows = json.loads((tmp_path / "selectivity.json").read_text())["rows"]
+    specs = [json.loads(p.read_text())["spec"] for p in (tmp_path / "tasks").glob("*.json")]
+    assert len(specs) == 2 * len(rows) and sum(s.get("model_params") == {"n_ts": 1} for s in specs) == len(rows)

@@ -217,7 +217,8 @@ def _selectivity(args) -> int:
             if not (0 < c <= 1):
                 raise UserError(f"coherence must be in (0, 1], got {c:g}")
     classes = [c.strip() for c in args.classes.split(",")] if args.classes else None
-    res = selectivity_sweep(parse_models(args.models), args.out, which=args.grid, coherences=coh,
+    models = parse_models(args.models)
+    res = selectivity_sweep(models, args.out, which=args.grid, coherences=coh, params=args.model_params,
                             seed=stimulus_seed_of(args), workers=args.workers, scheduler=args.scheduler,
                             backend=args.backend, arch=args.arch, progress=not args.no_progress,
                             figures=not args.no_figures, classes=classes)
@@ -257,6 +258,7 @@ def experiment_main(argv: Sequence[str]) -> int:
                                              "(sizes, speeds, grey levels, gratings, coherences)")
     add_output_option(p4, default="cdnf_experiments/selectivity")
     add_model_options(p4, default_models="all")
+    add_param_options(p4)
     grid_size = p4.add_mutually_exclusive_group()
     grid_size.add_argument("--quick", dest="grid", action="store_const", const="quick", default="quick",
                            help="small grid, base 120 px (default; a few minutes on 2 cores)")
@@ -291,6 +293,8 @@ def experiment_main(argv: Sequence[str]) -> int:
 
     if args.which in ("sweep", "selectivity"):
         check_model_options(args)
+        if args.which == "selectivity":  # checked before the output folder is made
+            args.model_params = params_from_args(args, parse_models(args.models))
         with output_lock(prepare_output(args.out)):
             return _param_sweep(args) if args.which == "sweep" else _selectivity(args)
     if args.which == "table2":
