@@ -172,6 +172,17 @@ def rain_conditions(args: argparse.Namespace) -> tuple[str, ...]:
     return RAIN_CONDITIONS[getattr(args, "rain", "off") or "off"]
 
 
+def note_unused_rain_options(args: argparse.Namespace) -> None:
+    """A ``note:`` when ``--rain-drops`` or ``--rain-seed`` is given but no rain is made (``--rain off``)."""
+    if getattr(args, "rain", "off") != "off":
+        return
+    unused = [o for o, d in (("--rain-drops", "rain_drops"), ("--rain-seed", "rain_seed"))
+              if getattr(args, d, None) is not None]
+    if unused:
+        verb = "change" if len(unused) > 1 else "changes"
+        note(f"{' and '.join(unused)} {verb} nothing without --rain (on or both)")
+
+
 # --- seeds: --seed (the default of every seed), --rain-seed, --stimulus-seed ------------------------
 
 def add_seed_options(ap: argparse.ArgumentParser, rain: bool = False, stimulus: bool = False) -> None:

@@ -40,6 +40,7 @@ from .cli_common import (
     add_rain_options,
     add_seed_options,
     check_model_options,
+    note_unused_rain_options,
     params_from_args,
     parse_models,
     rain_conditions,
@@ -361,6 +362,7 @@ def render_main(argv: Sequence[str]) -> int:
     ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     args = ap.parse_args(list(argv))
     models = parse_models(args.models)
+    note_unused_rain_options(args)
     check_model_options(args)
     params = params_from_args(args, models)
     conditions = rain_conditions(args)

@@ -50,6 +50,7 @@ from .cli_common import (
     check_model_options as check_model_options,
     drops_arg as drops_arg,
     finite_float as finite_float,
+    note_unused_rain_options,
     params_from_args,
     parse_models as parse_models,
     positive_float as positive_float,
@@ -109,6 +110,7 @@ def run_videos(argv: Sequence[str]) -> int:
     Inputs that share a name get distinct output names (:func:`unique_names`).
     """
     args = _videos_parser().parse_args(list(argv))
+    note_unused_rain_options(args)
     models = parse_models(args.models)
     check_model_options(args)
     params = params_from_args(args, models)

@@ -340,3 +340,9 @@ def test_experiment_selectivity_applies_param_and_does_not_reuse_other_params(tm
     rows = json.loads((tmp_path / "selectivity.json").read_text())["rows"]
     specs = [json.loads(p.read_text())["spec"] for p in (tmp_path / "tasks").glob("*.json")]
     assert len(specs) == 2 * len(rows) and sum(s.get("model_params") == {"n_ts": 1} for s in specs) == len(rows)
+
+
+def test_rain_options_without_rain_get_a_note(looming_npy, tmp_path, capsys):
+    assert main([str(looming_npy), "--rain-drops", "20", "--out", str(tmp_path / "o"), "--no-progress"]) == 0
+    assert "note: --rain-drops changes nothing without --rain" in capsys.readouterr().err
+    assert [r["condition"] for r in _summary(tmp_path / "o")] == ["clean"]

@@ -29,6 +29,7 @@ from ..cli_common import (
     add_seed_options,
     check_model_options,
     note,
+    note_unused_rain_options,
     params_from_args,
     parse_models,
     rain_seed_of,
@@ -115,6 +116,7 @@ def _skip_missing(args, folder: Path) -> None:
 
 
 def _dataset(args, folder: Path, out: Path) -> int:
+    note_unused_rain_options(args)
     models = parse_models(args.models)
     check_model_options(args)
     params = params_from_args(args, models)
