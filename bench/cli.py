@@ -126,6 +126,46 @@ def bench_inputs(n_frames: int, clip: str | None = None,
     return out
 
 
+class Progress:
+    """Progress of the bench on stderr: a tqdm bar in a terminal, one line per finished run in a log.
+
+    ``update(what)`` counts one finished measurement (``what`` names it and its result).
+    """
+
+    def __init__(self, total: int, enabled: bool = True) -> None:
+        from tqdm import tqdm
+
+        self.total, self.done, self.enabled = total, 0, enabled
+        self.tty = enabled and sys.stderr.isatty()
+        self.bar = tqdm(total=total, desc="bench", unit="run", leave=False, file=sys.stderr) if self.tty else None
+
+    def update(self, n: int = 1, what: str = "") -> None:
+        self.done += n
+        if self.bar is not None:
+            self.bar.set_postfix_str(what[:60], refresh=False)
+            self.bar.update(n)
+        elif self.enabled:
+            print(f"bench [{self.done}/{self.total}] {what}", file=sys.stderr, flush=True)
+
+    def set_description(self, text: str) -> None:
+        if self.bar is not None:
+            self.bar.set_description(text)
+        elif self.enabled:
+            print(text, file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+#: What the bench's stand-in input is (printed when it is used).
+STANDIN_NOTE = ("input 'standin' is a generated dashcam-like clip (made at 426x240, resized to each size): a textured "
+                "scene drifting and zooming "
+                "(every pixel changes, as under camera motion) with a dark box looming in the middle; it stands in "
+                "for real footage because no --clip was given and the sample dashcam clip is not present here. "
+                "Pass --clip VIDEO to measure on your own footage")
+
+
 def _iteration_stats(row: BenchRow, diag: dict) -> None:
     if "iterations_on" in diag:
         its = [float(np.mean(diag[k])) for k in ("iterations_on", "iterations_off", "iterations_sum")]
@@ -154,7 +194,8 @@ def model_rows(models: Sequence[str], inputs, repeats: int, reference: bool, bar
                     warnings.simplefilter("ignore", NotConvergedWarning)  # recorded per frame in "converged"
                     tm = time_model(lambda: create_model(name, params, backend="taichi", arch=arch), frames, repeats)
                 if bar is not None:
-                    bar.update(1)
+                    bar.update(1, f"{name}{' ' + scheme if scheme else ''} ({comp}) {in_label} {res}: "
+                                  f"{tm.fps:.1f} frames/s")
                 row = BenchRow(name, in_label, res, tm.fps, compiler=comp, scheme=scheme, arch=arch,
                                max_diff=float(np.abs(tm.outputs - ref).max()) if ref is not None else float("nan"),
                                best_fps=tm.best_fps)
@@ -164,7 +205,7 @@ def model_rows(models: Sequence[str], inputs, repeats: int, reference: bool, bar
 
 
 def _child_rows(compiler: str, models: Sequence[str], n_frames: int, repeats: int, clip: str | None,
-                reference: bool, resolutions, arch: str = "cpu") -> list[BenchRow]:
+                reference: bool, resolutions, arch: str = "cpu", progress: bool = True) -> list[BenchRow]:
     """:func:`model_rows` under another compiler, in a child process (one compiler per process)."""
     import json
     import os
@@ -180,10 +221,18 @@ def _child_rows(compiler: str, models: Sequence[str], n_frames: int, repeats: in
             cmd += ["--clip", str(clip)]
         if not reference:
             cmd.append("--no-reference")
+        if not progress:
+            cmd.append("--no-progress")
         env = dict(os.environ, CDNF_TI_COMPILER=compiler)
-        proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
+        proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        lines = []
+        for line in proc.stderr:  # the child's progress lines, passed on as they come
+            lines.append(line.rstrip("\n"))
+            if progress and line.startswith("bench ["):
+                print(line.rstrip(), file=sys.stderr, flush=True)
+        proc.wait()
         if proc.returncode != 0 or not os.path.exists(out):
-            msg = (proc.stderr.strip().splitlines() or ["no output"])[-1]
+            msg = ([ln for ln in lines if ln.strip()] or ["no output"])[-1]
             warnings.warn(f"bench under {compiler} failed: {msg}", RuntimeWarning, stacklevel=2)
             return []
         with open(out) as f:
@@ -201,8 +250,6 @@ def run_bench(models: Sequence[str], n_frames: int = 30, repeats: int = 3, clip:
     a GPU), the peers on the CPU. Ratios ``x peer`` divide a row's frames/s by the peer's
     (plain scheme) on the same input, all from this one run.
     """
-    from tqdm import tqdm
-
     from ..taichi_runtime import current_compiler, ensure_taichi, installed_compilers
     from .peers import PeerCDNF, available_peers
 
@@ -212,22 +259,26 @@ def run_bench(models: Sequence[str], n_frames: int = 30, repeats: int = 3, clip:
     peers = list(available_peers())
     inputs = bench_inputs(n_frames, clip, resolutions)
     n_runs = sum(2 if m == "cdnf" else 1 for m in models)
-    bar = tqdm(total=len(inputs) * (n_runs + (len(peers) if "cdnf" in models else 0)),
-               desc="bench", unit="run", leave=False, disable=None if progress else True)
+    per_input = n_runs * sum(1 for c in compilers if c == here) + (len(peers) if "cdnf" in models else 0)
+    bar = Progress(len(inputs) * per_input, enabled=progress)
     rows: list[BenchRow] = []
     if here in compilers:
         rows += model_rows(models, inputs, repeats, reference, bar, arch)
     for comp in compilers:
         if comp != here:
-            bar.set_description(f"bench ({comp}, child process)")
-            rows += _child_rows(comp, models, n_frames, repeats, clip, reference, resolutions, arch)
+            bar.set_description(f"bench: {len(inputs) * n_runs} runs under {comp} in a child process "
+                                f"(one compiler per process)")
+            t0 = time.perf_counter()
+            child = _child_rows(comp, models, n_frames, repeats, clip, reference, resolutions, arch, progress)
+            bar.set_description(f"bench: {comp} done, {len(child)} rows in {time.perf_counter() - t0:.0f} s")
+            rows += child
     peer_rows = []
     if "cdnf" in models:
         for in_label, res, frames in inputs:
             ref = reference_outputs("cdnf", frames) if reference else None
             for peer in peers:
                 tm = time_model(lambda: PeerCDNF(peer), frames, repeats)
-                bar.update(1)
+                bar.update(1, f"cdnf[{peer}] {in_label} {res}: {tm.fps:.1f} frames/s")
                 prow = BenchRow(f"cdnf[{peer}]", in_label, res, tm.fps, scheme="plain", best_fps=tm.best_fps,
                                 max_diff=float(np.abs(tm.outputs - ref).max()) if ref is not None else float("nan"))
                 _iteration_stats(prow, tm.diagnostics)
@@ -278,8 +329,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=None, help="timed repeats, median reported (default 3)")
     ap.add_argument("--model", "--models", dest="models", default=None,
                     help="model name(s), comma separated, or 'all' (default: all; cdnf with --quick)")
-    ap.add_argument("--clip", default=None, help="real video to use (default: the development clip serial_vehicle_collision if present, "
-                         "else a generated stand-in)")
+    ap.add_argument("--clip", default=None,
+                    help="real video to use (default: the development clip serial_vehicle_collision if present, "
+                         "else a generated stand-in that the output describes)")
     ap.add_argument("--sizes", default=None,
                     help="comma-separated WxH list (default: 426x240,600x600)")
     ap.add_argument("--no-reference", action="store_true", help="skip the float64 reference comparison")
@@ -292,6 +344,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="also measure start-up (process start to the first frame) with a cold and a warm cache")
     ap.add_argument("--simd", action="store_true",
                     help="also report how wide the vector code is that each compiler makes of C-DNF's update loops")
+    ap.add_argument("--no-progress", action="store_true", help="hide progress (a bar, or one line per run in a log)")
     args = ap.parse_args(argv)
     n = args.frames if args.frames is not None else (6 if args.quick else 30)
     if n < 3:
@@ -332,14 +385,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         import json
         from dataclasses import asdict
 
-        rows = model_rows(models, bench_inputs(n, args.clip, resolutions), repeats, not args.no_reference,
-                          arch=args.arch)
+        inputs = bench_inputs(n, args.clip, resolutions)
+        n_runs = sum(2 if m == "cdnf" else 1 for m in models)
+        bar = Progress(len(inputs) * n_runs, enabled=not args.no_progress)
+        rows = model_rows(models, inputs, repeats, not args.no_reference, bar, arch=args.arch)
+        bar.close()
         with open(args.models_only, "w") as f:
             json.dump([asdict(r) for r in rows], f)
         return 0
     rows = run_bench(models, n, repeats, args.clip, reference=not args.no_reference, resolutions=resolutions,
-                     compilers=compilers, arch=args.arch)
+                     compilers=compilers, arch=args.arch, progress=not args.no_progress)
     print(format_table(rows))
+    if any(r.input == "standin" for r in rows):
+        print(f"\nNote: {STANDIN_NOTE}.")
     if args.startup:
         print()
         print(format_startup(measure_startup(compilers)))

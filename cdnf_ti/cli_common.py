@@ -12,16 +12,25 @@ The option scheme: one meaning per name in every subcommand (the README's "Optio
 ``--compiler``              arch, the kernel compiler
 ``--fps N``                 frame rate of file inputs (frames/s); wherever files are read
 ``--color-order bgr|rgb``   channel order of colour ``.npy`` arrays; wherever files are read
-``--rain``                  add synthetic rain; ``--rain both`` runs clean and rainy, ``--rain off``
-                            clean only (the batch commands take the same three words)
-``--rain-drops N``          droplets per frame; ``--rain-seed S`` the rain's seed
+``--rain [on|off|both]``    synthetic rain: the flag or ``on`` rainy only, ``both`` clean and rainy,
+                            ``off`` clean only (``none``/``only``: deprecated, with a note)
+``--rain-drops N``          droplets per frame (``--drops``: deprecated); ``--rain-seed S`` the rain's seed
 ``--stimulus-seed S``       the seed of generated stimuli (incoherent dots, grid stimuli)
 ``--seed S``                the default of every seed the command has (rain and stimulus)
-``--out DIR``               always a folder (created); a movie path only where the command makes
-                            one file (``render --out FILE.mp4``, ``live --record FILE.mp4``)
+``--skip-missing``          batch runs: leave out labelled clips that have no video (default: an error)
+``--out DIR``               always a folder (created; default ``cdnf_out`` or a folder inside it,
+                            ``cdnf_experiments/<name>`` for experiments); a movie path only where the
+                            command makes one file (``render --out FILE.mp4`` with one movie,
+                            ``generate --out FILE.avi``, ``live --record FILE.mp4``)
 ``--workers N``, ``--scheduler ADDRESS``  parallel batch runs
 ``--no-progress``           hide progress bars
 ==========================  =======================================================================
+
+Each command adds the options it has with the helpers here (:func:`add_model_options`,
+:func:`add_param_options`, :func:`add_input_options`, :func:`add_rain_options`,
+:func:`add_seed_options`, :func:`add_output_option`) and reads them back with
+:func:`params_from_args`, :func:`rain_conditions`, :func:`rain_seed_of` and
+:func:`stimulus_seed_of`, so that a name has one meaning and one help text everywhere.
 
 A leaf module: ``cdnf_ti.run`` (the entry point) and the subcommand modules
 (``demo``, ``generate``, ``render``, ``experiments.cli``, ``bench.cli``) import it;
@@ -31,12 +40,14 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 from typing import Sequence
 
 from .errors import UserError
 from .limits import MAX_DROPS
 from .models import MODELS, get_model_class
+from .param_options import model_params
 from .taichi_runtime import COMPILERS, check_arch, select_compiler
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
@@ -45,11 +56,179 @@ EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 class ArgumentParser(argparse.ArgumentParser):
     """The subcommands' parser: a bad option is one ``error:`` line and exit 2, like every user error.
 
-    (argparse's own ``error`` prints the whole usage block first.)
+    (argparse's own ``error`` prints the whole usage block first.) ``--rain`` followed by anything
+    but one of its words (``on``, ``off``, ``both`` and the deprecated ones) is the flag: ``--rain
+    clip.mp4`` is rain on ``clip.mp4``, not a bad ``--rain`` value (:func:`rain_flag_argv`).
     """
 
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(EXIT_USAGE, f"error: {message} (see {self.prog} --help)\n")
+
+    def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
+        if args is not None:
+            args = rain_flag_argv(list(args))
+        return super().parse_known_args(args, namespace)
+
+
+def note(text: str) -> None:
+    """Print ``note: <text>`` on stderr (one line)."""
+    print(f"note: {text}", file=sys.stderr)
+
+
+class _DeprecatedAlias(argparse.Action):
+    """An old spelling of an option: stores like the new one and prints a one-line ``note:``."""
+
+    def __init__(self, option_strings, dest, new_name: str = "", **kw):
+        self.new_name = new_name
+        super().__init__(option_strings, dest, **kw)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        note(f"{option_string} is deprecated; use {self.new_name}")
+        setattr(namespace, self.dest, values)
+
+
+def add_deprecated_alias(ap: argparse.ArgumentParser, old: str, new: str, dest: str, **kw) -> None:
+    """Accept ``old`` as a hidden, deprecated spelling of option ``new`` (same ``dest``, a ``note:`` when used)."""
+    ap.add_argument(old, dest=dest, action=_DeprecatedAlias, new_name=new, help=argparse.SUPPRESS,
+                    default=argparse.SUPPRESS, **kw)
+
+
+# --- files read: --fps, --color-order -------------------------------------------------------------
+
+def add_input_options(ap: argparse.ArgumentParser) -> None:
+    """``--fps`` and ``--color-order``: how file inputs are read (every command that reads files)."""
+    ap.add_argument("--fps", type=positive_float, default=None,
+                    help="frame rate of the file inputs in frames/s (default: a video's own rate; 30 for image "
+                         "folders and .npy arrays, which carry none)")
+    ap.add_argument("--color-order", choices=("bgr", "rgb"), default="bgr",
+                    help="channel order of colour .npy arrays (default: %(default)s, as OpenCV; arrays "
+                         "from imageio, PIL or matplotlib are rgb). Video files and images are decoded by "
+                         "OpenCV and are always right")
+
+
+# --- rain: --rain [on|off|both], --rain-drops, --rain-seed ----------------------------------------
+
+#: The words of ``--rain``: ``off`` clean input only, ``on`` rainy input only, ``both`` each input twice.
+RAIN_WORDS = ("on", "off", "both")
+#: Deprecated words (the batch commands' former ``--rain none|only|both``) and what they mean now.
+OLD_RAIN_WORDS = {"none": "off", "only": "on"}
+#: ``--rain`` word -> the conditions it runs, in order.
+RAIN_CONDITIONS = {"off": ("clean",), "on": ("rain",), "both": ("clean", "rain")}
+#: ``--rain`` word -> the batch engines' ``rain=`` argument (:data:`cdnf_ti.experiments.layout.RAIN_CHOICES`).
+RAIN_ENGINE_WORD = {"off": "none", "on": "only", "both": "both"}
+
+
+def rain_word(text: str) -> str:
+    """argparse type of ``--rain``: ``on``, ``off`` or ``both`` (``none``/``only``: deprecated, with a note)."""
+    w = str(text).strip().lower()
+    if w in RAIN_WORDS:
+        return w
+    if w in OLD_RAIN_WORDS:
+        note(f"--rain {w} is deprecated; use --rain {OLD_RAIN_WORDS[w]}")
+        return OLD_RAIN_WORDS[w]
+    raise argparse.ArgumentTypeError(f"expected one of {', '.join(RAIN_WORDS)}, got {text!r}")
+
+
+def rain_flag_argv(argv: list[str]) -> list[str]:
+    """``--rain`` not followed by a rain word becomes ``--rain=on`` (so the next word stays an input)."""
+    words = set(RAIN_WORDS) | set(OLD_RAIN_WORDS)
+    out = []
+    for i, a in enumerate(argv):
+        if a == "--":
+            return out + argv[i:]
+        if a == "--rain" and (i + 1 >= len(argv) or argv[i + 1].strip().lower() not in words):
+            out.append("--rain=on")
+        else:
+            out.append(a)
+    return out
+
+
+def add_rain_options(ap: argparse.ArgumentParser, default: str = "off", flag: bool = True,
+                     what: str = "each input", drops: bool = True) -> None:
+    """``--rain [on|off|both]``, ``--rain-drops N`` and (deprecated) ``--drops``.
+
+    Parameters
+    ----------
+    default : {"off", "on", "both"}
+        What the command does without ``--rain``.
+    flag : bool
+        Whether ``--rain`` is offered (``rain`` always rains: it has only the drop count).
+    drops : bool
+        Whether ``--rain-drops`` is offered (the command can set the droplet count).
+    """
+    if flag:
+        ap.add_argument("--rain", nargs="?", const="on", default=default, type=rain_word, metavar="on|off|both",
+                        help=f"synthetic rain (paper, Sec. III-A-2) on {what}, in memory: --rain or --rain on = "
+                             f"rainy only, --rain both = clean and rainy, --rain off = clean only "
+                             f"(default: {default})")
+    if drops:
+        ap.add_argument("--rain-drops", type=drops_arg, default=None, metavar="N",
+                        help="rain droplets per frame (default: 500 per 426x240, scaled by the frame area)")
+        add_deprecated_alias(ap, "--drops", "--rain-drops", "rain_drops", type=drops_arg)
+
+
+def rain_conditions(args: argparse.Namespace) -> tuple[str, ...]:
+    """The conditions ``--rain`` asks for: ``("clean",)``, ``("rain",)`` or ``("clean", "rain")``."""
+    return RAIN_CONDITIONS[getattr(args, "rain", "off") or "off"]
+
+
+def note_unused_rain_options(args: argparse.Namespace) -> None:
+    """A ``note:`` when ``--rain-drops`` or ``--rain-seed`` is given but no rain is made (``--rain off``)."""
+    if getattr(args, "rain", "off") != "off":
+        return
+    unused = [o for o, d in (("--rain-drops", "rain_drops"), ("--rain-seed", "rain_seed"))
+              if getattr(args, d, None) is not None]
+    if unused:
+        verb = "change" if len(unused) > 1 else "changes"
+        note(f"{' and '.join(unused)} {verb} nothing without --rain (on or both)")
+
+
+# --- seeds: --seed (the default of every seed), --rain-seed, --stimulus-seed ------------------------
+
+def add_seed_options(ap: argparse.ArgumentParser, rain: bool = False, stimulus: bool = False) -> None:
+    """``--seed S`` (default 0) and the seeds it is the default of: ``--rain-seed``, ``--stimulus-seed``.
+
+    Read them back with :func:`rain_seed_of` and :func:`stimulus_seed_of`.
+    """
+    kinds = [k for k, on in (("--rain-seed", rain), ("--stimulus-seed", stimulus)) if on]
+    ap.add_argument("--seed", type=seed_arg, default=0, metavar="S",
+                    help=f"the default of every seed of the command ({', '.join(kinds) or 'none'}; default 0)")
+    if rain:
+        ap.add_argument("--rain-seed", type=seed_arg, default=None, metavar="S",
+                        help="seed of the synthetic rain (default: --seed)")
+    if stimulus:
+        ap.add_argument("--stimulus-seed", type=seed_arg, default=None, metavar="S",
+                        help="seed of the generated stimuli: the incoherent displacement (default: --seed)")
+
+
+def rain_seed_of(args: argparse.Namespace) -> int:
+    """``--rain-seed``, else ``--seed``, else 0."""
+    v = getattr(args, "rain_seed", None)
+    return int(v if v is not None else (getattr(args, "seed", 0) or 0))
+
+
+def stimulus_seed_of(args: argparse.Namespace) -> int:
+    """``--stimulus-seed``, else ``--seed``, else 0."""
+    v = getattr(args, "stimulus_seed", None)
+    return int(v if v is not None else (getattr(args, "seed", 0) or 0))
+
+
+# --- output: --out ------------------------------------------------------------------------------------
+
+#: Where results go without ``--out`` (``run``; the other commands use a folder inside it).
+DEFAULT_OUT = "cdnf_out"
+
+
+def add_output_option(ap: argparse.ArgumentParser, default: str | None = DEFAULT_OUT, movie: bool = False) -> None:
+    """``--out DIR``: the folder results go to (created; ``default`` without it).
+
+    With ``movie=True`` (``render``) ``--out`` may also name the movie file itself (``.mp4``/``.avi``)
+    when the command makes one file.
+    """
+    text = ("output folder (created)" if not movie else
+            "output folder (created), or the movie file (.mp4/.avi) when the command makes one movie")
+    ap.add_argument("--out", default=default, required=default is None, metavar="DIR",
+                    help=text + (f" (default: {default})" if default else ""))
 
 
 def add_model_options(ap: argparse.ArgumentParser, default_models: str = "cdnf") -> None:
@@ -79,8 +258,6 @@ def add_param_options(ap: argparse.ArgumentParser, epsilon: bool = True) -> None
 
 def params_from_args(args: argparse.Namespace, models: Sequence[str]) -> dict:
     """``{model: params or None}`` from the options of :func:`add_param_options` (one-line errors)."""
-    from .param_options import model_params
-
     return model_params(models, getattr(args, "param", []) or [], getattr(args, "epsilon", None))
 
 

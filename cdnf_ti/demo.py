@@ -7,7 +7,14 @@ import time
 import warnings
 from typing import Sequence
 
-from .cli_common import ArgumentParser, add_model_options, check_model_options, parse_models
+from .cli_common import (
+    ArgumentParser,
+    add_model_options,
+    add_param_options,
+    check_model_options,
+    params_from_args,
+    parse_models,
+)
 from .limits import check_frame_size
 from .models import create_model
 from .models.base import NotConvergedWarning
@@ -16,8 +23,8 @@ from .stimuli.basic import BASIC_STIMULI, PAPER_LABELS, basic_stimulus
 
 
 def selectivity_table(models: Sequence[str], size: int = 600, backend: str = "taichi", arch: str = "cpu",
-                      progress: bool = True) -> dict[str, dict[str, dict]]:
-    """Run each model on the six basic stimuli.
+                      progress: bool = True, params: dict | None = None) -> dict[str, dict[str, dict]]:
+    """Run each model on the six basic stimuli (``params``: ``{model: parameter object or None}``).
 
     Returns
     -------
@@ -30,7 +37,7 @@ def selectivity_table(models: Sequence[str], size: int = 600, backend: str = "ta
         result[name] = {}
         for stim in BASIC_STIMULI:
             s = basic_stimulus(stim, height=size, width=size)
-            model = create_model(name, backend=backend, arch=arch, fps=s.fps)
+            model = create_model(name, (params or {}).get(name), backend=backend, arch=arch, fps=s.fps)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", NotConvergedWarning)  # recorded in "converged"
                 tr = model.run(s.frames(), progress=f"{name} {stim}" if progress else False, total=s.n_frames)
@@ -69,16 +76,19 @@ def main(argv: Sequence[str] = ()) -> int:
     ap = ArgumentParser(prog="python -m cdnf_ti.run demo",
                         description="Basic selectivity (paper Table I) on the six basic stimuli.")
     add_model_options(ap, default_models="cdnf")
+    add_param_options(ap)
     ap.add_argument("--size", type=int, default=600, help="frame size in px (default: %(default)s, as the paper)")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(list(argv))
     models = parse_models(args.models)
     check_frame_size(args.size, args.size, n_models=1, what="--size")
     check_model_options(args)
+    params = params_from_args(args, models)
     t0 = time.perf_counter()
     print(f"cdnf_ti demo: basic selectivity on six {args.size}x{args.size} stimuli at 30 fps "
           f"(models: {', '.join(models)})", flush=True)
-    res = selectivity_table(models, args.size, args.backend, args.arch, progress=not args.no_progress)
+    res = selectivity_table(models, args.size, args.backend, args.arch, progress=not args.no_progress,
+                            params=params)
     print(format_table1(res))
     for m in models:
         fps = [r["fps"] for r in res[m].values()]

@@ -2,10 +2,12 @@
 
 Usage::
 
-    python -m cdnf_ti.run generate dark_looming --coherence 0.2 --seed 3 --size 240 --out loom.avi
+    python -m cdnf_ti.run generate dark_looming --coherence 0.2 --stimulus-seed 3 --size 240 --out loom.avi
     python -m cdnf_ti.run generate dark_translating --coherence 0.2 --scatter static --out bar.avi
     python -m cdnf_ti.run generate light_translating --out frames_dir          # PNG folder
-    python -m cdnf_ti.run rain clip1.mp4 clip2.mp4 --out rainy/ --seed 7      # rainy/clip1_rain.avi ...
+    python -m cdnf_ti.run rain clip1.mp4 clip2.mp4 --out rainy/ --rain-seed 7  # rainy/clip1_rain.avi ...
+
+``--seed`` is the default of every seed (``generate``: ``--stimulus-seed`` and ``--rain-seed``).
 
 Output is lossless (FFV1 AVI, or a folder of PNG frames when ``--out`` has no
 suffix) plus a JSON sidecar (``x.avi`` -> ``x.json``; folder -> ``folder/sidecar.json``)
@@ -21,7 +23,17 @@ from typing import Sequence
 
 from . import __version__
 from .atomic import prepare_output
-from .cli_common import ArgumentParser, drops_arg, positive_float, seed_arg
+from .cli_common import (
+    DEFAULT_OUT,
+    ArgumentParser,
+    add_input_options,
+    add_output_option,
+    add_rain_options,
+    add_seed_options,
+    positive_float,
+    rain_seed_of,
+    stimulus_seed_of,
+)
 from .errors import OutputError, UserError
 from .frames import iter_grey
 from .inputs import resolve_input
@@ -30,14 +42,6 @@ from .stimuli.basic import BASIC_STIMULI, basic_stimulus
 from .stimuli.incoherent import SCATTERS, IncoherentStimulus
 from .stimuli.io import output_format, write_frames, write_sidecar
 from .stimuli.rain import RainParams, RainyFrames
-
-
-def _add_rain_options(ap: argparse.ArgumentParser, flag: bool) -> None:
-    if flag:
-        ap.add_argument("--rain", action="store_true", help="add synthetic rain (paper defaults)")
-    ap.add_argument("--rain-seed", type=seed_arg, default=0, help="rain seed (default: %(default)s)")
-    ap.add_argument("--rain-drops", type=drops_arg, default=None,
-                    help="droplets per frame (default: 500 per 426x240, scaled by area)")
 
 
 def rain_params_from_args(args: argparse.Namespace):
@@ -52,7 +56,6 @@ def generate_main(argv: Sequence[str]) -> int:
                                     "(FFV1 .avi, or a PNG folder) with a JSON sidecar.")
     ap.add_argument("name", choices=BASIC_STIMULI, metavar="NAME", help=f"one of: {', '.join(BASIC_STIMULI)}")
     ap.add_argument("--coherence", type=float, default=1.0, help="coherence degree c in (0, 1] (default 1)")
-    ap.add_argument("--seed", type=seed_arg, default=0, help="seed of the incoherent displacement (default 0)")
     ap.add_argument("--scatter", choices=SCATTERS, default="flicker",
                     help="incoherent construction: displaced dots vanish with their leaving source and reappear "
                          "elsewhere (flicker, default), or pass to an entering source and stay put (static)")
@@ -63,16 +66,23 @@ def generate_main(argv: Sequence[str]) -> int:
     ap.add_argument("--width", type=int, default=None)
     ap.add_argument("--fps", type=positive_float, default=None, help="frames per second (default 30)")
     ap.add_argument("--duration", type=positive_float, default=None, help="motion duration in s (default 1.5)")
-    _add_rain_options(ap, flag=True)
-    ap.add_argument("--out", required=True, help="output .avi (FFV1) or folder (PNG frames)")
+    add_rain_options(ap, default="off", what="the stimulus (on or off: the output is one stimulus)")
+    add_seed_options(ap, rain=True, stimulus=True)
+    ap.add_argument("--out", default=None, metavar="PATH",
+                    help=f"the output: a .avi file (FFV1) or a folder (PNG frames) (default: {DEFAULT_OUT}/NAME.avi)")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(list(argv))
+    if args.rain == "both":
+        raise UserError("generate writes one stimulus: --rain on or off, not both (run it twice)")
+    if args.out is None:
+        args.out = str(Path(DEFAULT_OUT) / f"{args.name}.avi")
     output_format(args.out)
+    seed = stimulus_seed_of(args)
     size = args.size if args.size is not None else 600
     height = args.height if args.height is not None else size
     width = args.width if args.width is not None else size
     check_frame_size(height, width, n_models=0, what="frame size")
-    if args.rain:
+    if args.rain == "on":
         check_drops(args.rain_drops, (height, width), what="--rain-drops")
     prepare_output(Path(args.out).parent)  # before any work: the output's folder must be writable
     kw: dict = {}
@@ -83,13 +93,13 @@ def generate_main(argv: Sequence[str]) -> int:
             kw[k] = getattr(args, k)
     try:  # the stimulus classes check their parameters (coherence in (0, 1], ...)
         base = basic_stimulus(args.name, **kw)
-        stim = IncoherentStimulus(base, args.coherence, args.seed, scatter=args.scatter)
+        stim = IncoherentStimulus(base, args.coherence, seed, scatter=args.scatter)
     except (ValueError, TypeError) as e:
         raise UserError(str(e)) from None
     frames = stim.frames()
     rain = None
-    if args.rain:
-        rain = RainyFrames(frames, rain_params_from_args(args), seed=args.rain_seed)
+    if args.rain == "on":
+        rain = RainyFrames(frames, rain_params_from_args(args), seed=rain_seed_of(args))
         frames = iter(rain)
     n = write_frames(frames, args.out, fps=base.fps, progress=False if args.no_progress else args.name,
                      total=base.n_frames)
@@ -110,7 +120,7 @@ def generate_main(argv: Sequence[str]) -> int:
     sp = write_sidecar(args.out, meta)
     halt = "" if stim.halted_at is None else f", halted at frame {stim.halted_at}"
     snr = "" if rain is None else f", rain SNR {rain.snr_db:.2f} dB"
-    print(f"{args.out}: {args.name} c={args.coherence:g} seed={args.seed} scatter={args.scatter}, {n} frames "
+    print(f"{args.out}: {args.name} c={args.coherence:g} seed={seed} scatter={args.scatter}, {n} frames "
           f"{base.width}x{base.height}{halt}{snr}; sidecar {sp}")
     return 0
 
@@ -121,25 +131,26 @@ def rain_main(argv: Sequence[str]) -> int:
                         description="Add synthetic rain (paper, Sec. III-A-2) to videos; write lossless "
                                     "DIR/<clip>_rain.avi (or PNG folders) plus JSON sidecars with the SNR.")
     ap.add_argument("inputs", nargs="+", metavar="VIDEO", help="video file, image folder, .npy, or stim:NAME?...")
-    ap.add_argument("--out", required=True, help="output folder")
-    ap.add_argument("--seed", type=seed_arg, default=0, help="rain seed (default: %(default)s)")
-    ap.add_argument("--drops", type=drops_arg, default=None,
-                    help="droplets per frame (default: 500 per 426x240, scaled by area)")
+    add_output_option(ap, default=f"{DEFAULT_OUT}/rain")
+    add_input_options(ap)
+    add_rain_options(ap, flag=False)
+    add_seed_options(ap, rain=True)
     ap.add_argument("--format", choices=("avi", "png"), default="avi", help="FFV1 AVI (default) or PNG folders")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(list(argv))
-    params = RainParams(drops=args.drops)
+    params = RainParams(drops=args.rain_drops)
+    seed = rain_seed_of(args)
     out = prepare_output(args.out)  # before any work
     failed = 0
     snrs = []
     for spec in args.inputs:
         t0 = time.perf_counter()
         try:
-            src = resolve_input(spec)
+            src = resolve_input(spec, fps=args.fps, color_order=args.color_order)
             check_frame_size(*src.shape, n_models=0, what=str(spec))
-            check_drops(args.drops, src.shape, what="--drops")
+            check_drops(args.rain_drops, src.shape, what="--rain-drops")
             target = out / (f"{src.name}_rain.avi" if args.format == "avi" else f"{src.name}_rain")
-            rain = RainyFrames(iter_grey(src), params, seed=args.seed)
+            rain = RainyFrames(iter_grey(src), params, seed=seed)
             n = write_frames(rain, target, fps=src.fps, progress=False if args.no_progress else src.name,
                              total=src.n_frames)
         except UserError as e:
@@ -158,7 +169,7 @@ def rain_main(argv: Sequence[str]) -> int:
             "width": src.shape[1],
             "fps": src.fps,
             "quantisation": "uint8 = round(255 * x)",
-            "rain": {**params.to_dict(), "seed": args.seed, "drops_per_frame": params.drops_for(src.shape)},
+            "rain": {**params.to_dict(), "seed": seed, "drops_per_frame": params.drops_for(src.shape)},
             "snr_db": rain.snr_db,
             "snr_db_per_frame": rain.snr_per_frame,
         })

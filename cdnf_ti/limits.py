@@ -3,7 +3,9 @@ instead of a MemoryError (or hours of swapping) later.
 
 Limits (see README, "Limits"):
 
-* frame side at most :data:`MAX_SIDE` px;
+* frame side at least :data:`MIN_SIDE` px where models run (the widest kernel: a smaller frame
+  cannot hold one receptive field, and the models' output on it means nothing), and at most
+  :data:`MAX_SIDE` px;
 * estimated working memory of one run at most half of this machine's physical
   memory: :data:`BYTES_PER_PIXEL_PER_MODEL` bytes per pixel per model (measured:
   C-DNF ~90 B/px, LGMD2 ~48, LGMD1 ~44, SDNF ~40, with float32 fields and
@@ -21,6 +23,8 @@ import os
 from .errors import UserError
 
 MAX_SIDE = 16384
+#: The widest default kernel (px): C-DNF's Summation DoG, ``2 ceil(3 sigma_2) + 1`` with ``sigma_2 = 1``.
+MIN_SIDE = 7
 BYTES_PER_PIXEL_PER_MODEL = 128
 BYTES_PER_PIXEL_PIPELINE = 32
 MAX_DROPS = 1_000_000
@@ -53,11 +57,15 @@ def check_frame_size(height: int, width: int, n_models: int = 1, what: str = "fr
     height, width : int
         Frame size in px.
     n_models : int
-        Models run together on each frame.
+        Models run together on each frame (0: frames are only written, e.g. ``generate``; then
+        the :data:`MIN_SIDE` limit does not apply).
     what : str
         What the size belongs to, for the message (``"--size"``, ``"clip.mp4"``).
     """
     h, w = int(height), int(width)
+    if n_models > 0 and (h < MIN_SIDE or w < MIN_SIDE):
+        raise UserError(f"{what}: frames of {w}x{h} px are smaller than the widest kernel; the models need at "
+                        f"least {MIN_SIDE}x{MIN_SIDE} px")
     if h < 2 or w < 2:
         raise UserError(f"{what}: a frame must be at least 2x2 px, got {w}x{h}")
     if max(h, w) > MAX_SIDE:

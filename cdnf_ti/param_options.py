@@ -20,6 +20,7 @@ import math
 from typing import Any, Sequence
 
 from .errors import UserError
+from .models import get_model_class
 
 
 def field_kind(params_type: type, name: str) -> str:
@@ -96,8 +97,6 @@ def model_params(models: Sequence[str], specs: Sequence[str], epsilon: float | N
         A malformed spec, a parameter no selected model has, a model not selected, a value of
         the wrong type, or values the model's validation rejects.
     """
-    from .models import get_model_class
-
     classes = {m: get_model_class(m) for m in models}
     changes: dict[str, dict[str, Any]] = {m: {} for m in models}
     if epsilon is not None:

@@ -6,6 +6,15 @@ inner fields, colour-mapped (C-DNF: the ON, OFF and Summation fields
 above the model's output trace so far with its threshold (or, for the LGMD
 family, the spike count and ``n_ts``) and the alert. It shows why a model fires.
 
+Every panel has a colour bar with a **fixed** scale: a first pass over the input
+finds each field's range over the whole clip (0.5 and 99.5 percentiles of each
+frame, then the extremes of those), so a colour means the same value in every
+frame. Signed fields use a diverging map symmetric about 0.
+
+Several models (``--model cdnf,lgmd2``) or ``--rain both`` make one movie each,
+``<clip>.<model>[.rain].mp4`` in the ``--out`` folder; ``--out`` names the movie
+file itself (``.mp4`` or ``.avi``) when one movie is made.
+
 Frames are drawn with OpenCV (no matplotlib per frame) and written by
 :func:`cdnf_ti.video.write_video`.
 """
@@ -20,14 +29,32 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from .cli_common import EXIT_OK, ArgumentParser, add_model_options, parse_models
+from .atomic import prepare_output
+from .cli_common import (
+    EXIT_OK,
+    ArgumentParser,
+    add_input_options,
+    add_model_options,
+    add_output_option,
+    add_param_options,
+    add_rain_options,
+    add_seed_options,
+    check_model_options,
+    note_unused_rain_options,
+    params_from_args,
+    parse_models,
+    rain_conditions,
+    rain_seed_of,
+)
 from .errors import UserError
 from .experiments.labels import find_clip
 from .experiments.layout import trace_path
 from .frames import iter_grey, to_grey
 from .inputs import resolve_input
+from .limits import check_frame_size
 from .models import create_model
 from .models.base import NotConvergedWarning
+from .stimuli.rain import RainParams, RainyFrames
 from .video import codec_for, write_video
 
 #: Fields shown per model (first three found), and their colour scale: "signed" (symmetric about 0) or "pos".
@@ -47,24 +74,100 @@ def _pick_fields(model_name: str, fields: dict[str, np.ndarray]) -> list[tuple[s
     return (pref + rest)[:3]
 
 
-class _Scale:
-    """Colour scale of one field: symmetric about 0 for signed fields, fixed after the
-    first frames so colours mean the same value all through the movie (running max)."""
+#: Width (px) of the colour bar strip right of every panel: the bar and its value labels.
+CBAR_W = 56
 
-    def __init__(self) -> None:
-        self.lo, self.hi = 0.0, 1e-6
+
+class FieldScale:
+    """A fixed colour scale of one field: ``lo .. hi``; a field with negative values is shown
+    symmetric about 0 with a diverging map, a non-negative one from 0 with TURBO.
+
+    Without a range (``FieldScale()``) the scale grows with the values it has seen (a running
+    range; :func:`render_frames` called without ``ranges``).
+    """
+
+    def __init__(self, lo: float | None = None, hi: float | None = None, grey: bool = False) -> None:
+        self.grey = grey  # a grey ramp (the input panel)
+        self.fixed = lo is not None and hi is not None
+        self.lo, self.hi = (float(lo), float(hi)) if self.fixed else (0.0, 1e-6)
+
+    @property
+    def signed(self) -> bool:
+        return self.lo < 0
+
+    @property
+    def limits(self) -> tuple[float, float]:
+        """The values at the two ends of the colour bar."""
+        if self.signed:
+            m = max(abs(self.lo), abs(self.hi), 1e-6)
+            return -m, m
+        return min(self.lo, 0.0), max(self.hi, min(self.lo, 0.0) + 1e-6)
+
+    def _cmap(self) -> int:
+        return cv2.COLORMAP_TWILIGHT_SHIFTED if self.signed else cv2.COLORMAP_TURBO
 
     def __call__(self, a: np.ndarray) -> np.ndarray:
+        """The field as a BGR image (uint8, (H, W, 3))."""
         a = np.asarray(a, dtype=np.float32)
-        lo, hi = float(np.percentile(a, 0.5)), float(np.percentile(a, 99.5))
-        self.lo, self.hi = min(self.lo, lo), max(self.hi, hi)
-        m = max(abs(self.lo), abs(self.hi), 1e-6)
-        if self.lo < 0:
-            x = (a / m + 1.0) * 0.5
-        else:
-            x = a / m
-        u8 = np.clip(np.rint(x * 255.0), 0, 255).astype(np.uint8)
-        return cv2.applyColorMap(u8, cv2.COLORMAP_TURBO if self.lo >= 0 else cv2.COLORMAP_TWILIGHT_SHIFTED)
+        if not self.fixed:
+            lo, hi = robust_range(a)
+            self.lo, self.hi = min(self.lo, lo), max(self.hi, hi)
+        lo, hi = self.limits
+        u8 = np.clip(np.rint((a - lo) / (hi - lo) * 255.0), 0, 255).astype(np.uint8)
+        return cv2.applyColorMap(u8, self._cmap())
+
+    def bar(self, height: int) -> np.ndarray:
+        """The colour bar strip (``height`` x :data:`CBAR_W`): the map from ``hi`` (top) to ``lo``, labelled."""
+        img = np.full((height, CBAR_W, 3), 24, np.uint8)
+        ramp = np.linspace(255, 0, height).astype(np.uint8)[:, None]
+        ramp = np.repeat(ramp, 8, axis=1)
+        img[:, 2:10] = cv2.cvtColor(ramp, cv2.COLOR_GRAY2BGR) if self.grey else cv2.applyColorMap(ramp, self._cmap())
+        lo, hi = self.limits
+        marks = [(hi, 8), (lo, height - 2)] + ([(0.0, height // 2 + 3)] if self.signed and height >= 40 else [])
+        for v, y in marks:
+            cv2.putText(img, f"{v:.3g}", (12, y), PANEL_FONT, 0.3, (230, 230, 230), 1, cv2.LINE_AA)
+        return img
+
+
+def robust_range(a: np.ndarray) -> tuple[float, float]:
+    """The 0.5 and 99.5 percentiles of ``a`` (finite values; (0, 0) when none)."""
+    a = np.asarray(a, dtype=np.float32)
+    a = a[np.isfinite(a)]
+    if not a.size:
+        return 0.0, 0.0
+    lo, hi = np.percentile(a, (0.5, 99.5))
+    return float(lo), float(hi)
+
+
+def field_ranges(model: Any, frames: Iterator[np.ndarray], progress: bool | str = False,
+                 n_total: int | None = None) -> dict[str, tuple[float, float]]:
+    """First pass of a movie: each shown field's range over all ``frames`` (the colour bars' fixed scales).
+
+    Returns ``{field: (lo, hi)}``: the smallest 0.5 and the largest 99.5 percentile over the frames.
+    """
+    model.reset()
+    ranges: dict[str, tuple[float, float]] = {}
+    bar = tqdm(total=n_total, desc=progress, unit="frame", disable=None) if isinstance(progress, str) else None
+    try:
+        for frame in frames:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", NotConvergedWarning)
+                model.step(to_grey(frame))
+            fields = model.fields()
+            for key, _ in _pick_fields(model.name, fields):
+                lo, hi = robust_range(fields[key])
+                old = ranges.get(key, (lo, hi))
+                ranges[key] = (min(old[0], lo), max(old[1], hi))
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+    return ranges
+
+
+#: The input panel's scale: grey levels 0..1.
+_GREY_SCALE = FieldScale(0.0, 1.0, grey=True)
 
 
 def _label(img: np.ndarray, text: str) -> None:
@@ -113,14 +216,15 @@ def _trace_panel(width: int, t: int, n_total: int | None, out: list[float], thr:
     alert = bool(spikes and spikes[-1])
     cv2.putText(img, f"{name}  frame {t}  t={t / fps:.2f}s  (x axis: frames; purple: labelled window)", (x0, 16),
                 PANEL_FONT, 0.42, (255, 255, 255), 1, cv2.LINE_AA)
-    cv2.putText(img, "threshold --", (x1 - 200, 16), PANEL_FONT, 0.38, (0, 220, 255), 1, cv2.LINE_AA)
+    cv2.putText(img, "-- threshold", (x0 + 4, y0 + 12), PANEL_FONT, 0.35, (0, 220, 255), 1, cv2.LINE_AA)
     if alert:
-        cv2.putText(img, "ALERT", (x1 - 70, 17), PANEL_FONT, 0.55, (0, 0, 255), 2, cv2.LINE_AA)
+        cv2.putText(img, "ALERT", (x1 - 60, y0 + 16), PANEL_FONT, 0.55, (0, 0, 255), 2, cv2.LINE_AA)
     return img
 
 
 def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total: int | None = None,
-                  window: tuple[int, int] | None = None, progress: bool | str = False) -> Iterator[np.ndarray]:
+                  window: tuple[int, int] | None = None, progress: bool | str = False,
+                  ranges: dict[str, tuple[float, float]] | None = None) -> Iterator[np.ndarray]:
     """Step ``model`` through ``frames`` and yield one BGR movie frame per input frame.
 
     Parameters
@@ -135,12 +239,15 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
         Number of frames (fixes the trace's x axis).
     window : (int, int), optional
         The labelled collision window (frames), shaded in the trace.
+    ranges : dict, optional
+        ``{field: (lo, hi)}``, the fixed colour scales (:func:`field_ranges`); without it each
+        scale grows with the values seen so far.
     """
     model.reset()
     out: list[float] = []
     thr: list[float | None] = []
     spikes: list[bool] = []
-    scales = [_Scale(), _Scale(), _Scale()]
+    scales: dict[str, FieldScale] = {}
     uses_count = False
     n_ts = getattr(model.params, "n_ts", None)
     bar = None
@@ -163,15 +270,19 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
                 thr.append(float(dyn) if dyn is not None else model.threshold)
             spikes.append(bool(res.spike))
             g8 = grey if grey.dtype == np.uint8 else np.clip(np.rint(grey * 255), 0, 255).astype(np.uint8)
-            panels = [cv2.cvtColor(g8, cv2.COLOR_GRAY2BGR)]
-            _label(panels[0], "input")
+            grey_panel = cv2.cvtColor(g8, cv2.COLOR_GRAY2BGR)
+            _label(grey_panel, "input")
+            panels = [np.concatenate([grey_panel, _GREY_SCALE.bar(g8.shape[0])], 1)]
             fields = model.fields()
-            for (key, title), sc in zip(_pick_fields(model.name, fields), scales):
+            for key, title in _pick_fields(model.name, fields):
+                if key not in scales:
+                    scales[key] = FieldScale(*ranges[key]) if ranges and key in ranges else FieldScale()
+                sc = scales[key]
                 img = sc(fields[key])
                 if img.shape[:2] != g8.shape:
                     img = cv2.resize(img, (g8.shape[1], g8.shape[0]), interpolation=cv2.INTER_NEAREST)
                 _label(img, title)
-                panels.append(img)
+                panels.append(np.concatenate([img, sc.bar(g8.shape[0])], 1))
             while len(panels) < 4:
                 panels.append(np.zeros_like(panels[0]))
             top = np.concatenate([np.concatenate(panels[:2], 1), np.concatenate(panels[2:4], 1)], 0)
@@ -189,44 +300,72 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
 
 
 def render_video(source: str | Path, model_name: str, out: str | Path, params: Any = None, backend: str = "taichi",
-                 arch: str = "cpu", window: tuple[int, int] | None = None, progress: bool | str = False) -> int:
+                 arch: str = "cpu", window: tuple[int, int] | None = None, progress: bool | str = False,
+                 fps: float | None = None, color_order: str = "bgr", rain: Any = None, rain_seed: int = 0) -> int:
     """Render the field movie of ``model_name`` on ``source`` to ``out`` (.mp4 or .avi); returns the frame count.
+
+    Two passes over the input: the first fixes the colour scales (:func:`field_ranges`), the
+    second draws. ``fps``/``color_order`` are how a file is read; ``rain`` (a
+    :class:`~cdnf_ti.stimuli.rain.RainParams`) adds the same synthetic rain (seed ``rain_seed``)
+    in both passes.
 
     Raises
     ------
     InputError
         Unreadable input, or a video the codec cannot write.
     UserError
-        ``window`` is not ``0 <= start <= end <=`` the input's last frame.
+        ``window`` is not ``0 <= start <= end <=`` the input's last frame, or the frames are
+        smaller than the widest kernel.
     """
     codec_for(out)  # a bad suffix fails before any work
-    src = resolve_input(source)
+    src = resolve_input(source, fps=fps, color_order=color_order)
+    check_frame_size(*src.shape, n_models=1, what=str(source))
     if window is not None:
         last = src.n_frames - 1 if src.n_frames else None
         if not 0 <= window[0] <= window[1] or (last is not None and window[1] > last):
             raise UserError(f"{source}: window {window[0]}:{window[1]} must satisfy 0 <= START <= END <= "
                             f"{'the last frame' if last is None else last} (frames, inclusive)")
     model = create_model(model_name, params, backend=backend, arch=arch, fps=src.fps)
-    frames = render_frames(model, iter_grey(src), src.fps, src.n_frames, window, progress)
-    return write_video(out, frames, src.fps)
+
+    def frames():
+        grey = iter_grey(src)
+        return iter(RainyFrames(grey, rain, seed=rain_seed)) if rain is not None else grey
+
+    ranges = field_ranges(model, frames(), f"{progress} (colour scales)" if isinstance(progress, str) else False,
+                          src.n_frames)
+    movie = render_frames(model, frames(), src.fps, src.n_frames, window, progress, ranges)
+    return write_video(out, movie, src.fps)
+
+
+def movie_name(clip: str, model: str, condition: str = "clean", suffix: str = ".mp4") -> str:
+    """``<clip>.<model>.mp4``, or ``<clip>.<model>.<condition>.mp4`` for rain (as ``run``'s trace names)."""
+    return f"{clip}.{model}{suffix}" if condition == "clean" else f"{clip}.{model}.{condition}{suffix}"
 
 
 def render_main(argv: Sequence[str]) -> int:
-    """``python -m cdnf_ti.run render VIDEO --model cdnf --out movie.mp4``."""
+    """``python -m cdnf_ti.run render VIDEO [--model M[,M..]] [--rain [on|both]] [--out DIR|FILE.mp4]``."""
     ap = ArgumentParser(
         prog="python -m cdnf_ti.run render",
-        description="Write a field movie: the input, the model's ON, OFF and Summation fields (colour-mapped) "
-                    "and its output trace with threshold and alert, side by side.")
+        description="Write field movies: the input, the model's ON, OFF and Summation fields (colour-mapped, with "
+                    "colour bars of fixed scale) and its output trace with threshold and alert, side by side. "
+                    "One movie per model and condition (--model cdnf,lgmd2; --rain both): "
+                    "OUT/<clip>.<model>[.rain].mp4.")
     ap.add_argument("input", metavar="VIDEO", help="video file, image folder, .npy or stim:NAME")
-    ap.add_argument("--out", default=None, help="movie file, .mp4 or .avi (default: <input name>.<model>.mp4)")
+    add_output_option(ap, movie=True)
     add_model_options(ap)
+    add_param_options(ap)
+    add_input_options(ap)
+    add_rain_options(ap, default="off", what="the input")
+    add_seed_options(ap, rain=True)
     ap.add_argument("--window", default=None, metavar="START:END",
                     help="labelled collision window in frames, shaded in the trace")
     ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     args = ap.parse_args(list(argv))
     models = parse_models(args.models)
-    if len(models) != 1:
-        raise UserError("render takes one --model")
+    note_unused_rain_options(args)
+    check_model_options(args)
+    params = params_from_args(args, models)
+    conditions = rain_conditions(args)
     window = None
     if args.window:
         try:
@@ -234,16 +373,36 @@ def render_main(argv: Sequence[str]) -> int:
         except ValueError:
             raise UserError(f"--window must be START:END in frames, got {args.window!r}") from None
         window = (a, b)
-    out = Path(args.out) if args.out else Path(f"{Path(str(args.input)).stem}.{models[0]}.mp4")
-    n = render_video(args.input, models[0], out, backend=args.backend, arch=args.arch, window=window,
-                     progress=False if args.no_progress else f"render {Path(str(args.input)).name}")
-    print(f"{out}: {n} frames", file=sys.stderr)
+    clip = resolve_input(args.input, fps=args.fps, color_order=args.color_order).name
+    jobs = [(m, c) for m in models for c in conditions]
+    out = Path(args.out)
+    if out.suffix:  # a movie file
+        codec_for(out)
+        if len(jobs) > 1:
+            raise UserError(f"--out {out}: one movie file, but {len(jobs)} movies are made "
+                            f"({len(models)} model(s) x {len(conditions)} condition(s)); give a folder")
+        prepare_output(out.parent)
+        targets = [out]
+    else:
+        folder = prepare_output(out)
+        targets = [folder / movie_name(clip, m, c) for m, c in jobs]
+    rain = RainParams(drops=args.rain_drops) if "rain" in conditions else None
+    for (m, c), target in zip(jobs, targets):
+        label = f"render {Path(str(args.input)).name} [{m}{'' if c == 'clean' else ', ' + c}]"
+        n = render_video(args.input, m, target, params=params[m], backend=args.backend, arch=args.arch, window=window,
+                         progress=False if args.no_progress else label, fps=args.fps, color_order=args.color_order,
+                         rain=rain if c == "rain" else None, rain_seed=rain_seed_of(args))
+        print(f"{target}: {n} frames", file=sys.stderr)
     return EXIT_OK
 
 
-def render_dataset(run: Any, folder: str | Path, progress: bool = False) -> list[Path]:
+def render_dataset(run: Any, folder: str | Path, progress: bool = False, params: dict | None = None,
+                   fps: float | None = None, color_order: str = "bgr", backend: str = "taichi",
+                   arch: str = "cpu") -> list[Path]:
     """Field movies of every scored clip of a dataset run: ``OUT/movies/<clip>.<model>.mp4`` (clean input).
 
+    ``params`` (``{model: parameter object or None}``), ``fps`` and ``color_order`` are the run's
+    own (``--param``, ``--fps``, ``--color-order``), so a movie shows the model that was scored.
     A movie newer than its trace is kept (a rerun does not redraw it).
     """
     made = []
@@ -261,7 +420,8 @@ def render_dataset(run: Any, folder: str | Path, progress: bool = False) -> list
             if video is None:
                 continue
             window = (lab.window_start, lab.window_end) if lab.collision else None
-            render_video(video, m, movie, window=window,
-                         progress=f"movie {lab.clip} [{m}]" if progress else False)
+            render_video(video, m, movie, params=(params or {}).get(m), backend=backend, arch=arch, window=window,
+                         progress=f"movie {lab.clip} [{m}]" if progress else False, fps=fps,
+                         color_order=color_order)
             made.append(movie)
     return made

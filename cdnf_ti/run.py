@@ -3,8 +3,12 @@
 Usage::
 
     python -m cdnf_ti.run                                # demo: Table I on the six basic stimuli
-    python -m cdnf_ti.run VIDEO [VIDEO ...] --out DIR    # per-frame traces + one summary line per video
-    python -m cdnf_ti.run SUBCOMMAND ...                 # see SUBCOMMANDS below
+    python -m cdnf_ti.run run VIDEO [VIDEO ...] --out DIR  # per-frame traces + one summary line per video
+    python -m cdnf_ti.run VIDEO [VIDEO ...] --out DIR      # the same ('run' may be left out)
+    python -m cdnf_ti.run SUBCOMMAND ...                   # see SUBCOMMANDS below
+
+A first word that names a subcommand is the subcommand, even where a file or folder of that
+name exists (a note says so): run such an input as ``run demo`` or ``demo/``.
 
 Errors: a user error (bad file, bad option, unavailable device, output folder
 that cannot be written: :class:`~cdnf_ti.errors.UserError`) prints one line,
@@ -29,6 +33,7 @@ import warnings
 from pathlib import Path
 from typing import Callable, Sequence
 
+from .alert_rule import alert_summary
 from .atomic import atomic_write_text, output_lock, prepare_output
 from .cli_common import (
     EXIT_FAILED as EXIT_FAILED,  # re-exported: cdnf_ti.run was their home
@@ -36,20 +41,27 @@ from .cli_common import (
     EXIT_OK as EXIT_OK,
     EXIT_USAGE as EXIT_USAGE,
     ArgumentParser,
+    add_input_options,
     add_model_options as add_model_options,
+    add_output_option,
     add_param_options,
+    add_rain_options,
+    add_seed_options,
     check_model_options as check_model_options,
     drops_arg as drops_arg,
     finite_float as finite_float,
+    note_unused_rain_options,
     params_from_args,
     parse_models as parse_models,
     positive_float as positive_float,
+    rain_conditions,
+    rain_seed_of,
     seed_arg as seed_arg,
     unique_names as unique_names,
 )
 from .errors import InputError, UserError
 from .experiments.parallel import exit_on_second_interrupt, stop_all_pools
-from .frames import iter_grey
+from .frames import IMAGE_EXTENSIONS, iter_grey
 from .inputs import resolve_input
 from .limits import check_drops, check_frame_size
 from .models import create_model
@@ -59,6 +71,7 @@ from .taichi_runtime import lanes_override
 
 #: Subcommands: first word on the command line -> "module:function(argv) -> int".
 SUBCOMMANDS: dict[str, str] = {
+    "run": "cdnf_ti.run:run_videos",  # (main calls run_videos directly)
     "bench": "cdnf_ti.bench.cli:main",
     "demo": "cdnf_ti.demo:main",
     "generate": "cdnf_ti.generate:generate_main",
@@ -68,41 +81,36 @@ SUBCOMMANDS: dict[str, str] = {
     "render": "cdnf_ti.render:render_main",
 }
 
+
 def _videos_parser() -> argparse.ArgumentParser:
     ap = ArgumentParser(
-        prog="python -m cdnf_ti.run",
-        description="Run looming models on videos (files, image folders, .npy arrays). "
+        prog="python -m cdnf_ti.run [run]",
+        description="Run looming models on videos (files, image folders, .npy arrays, stim: specs) and write "
+                    "a trace per input, model and condition plus OUT/summary.csv. 'run' may be left out "
+                    "unless the first input is named like a subcommand (then write 'run NAME' or 'NAME/'). "
                     "With no arguments: the built-in demo (paper Table I). "
                     f"Subcommands: {', '.join(SUBCOMMANDS)} (e.g. 'python -m cdnf_ti.run demo --help').",
     )
     ap.add_argument("inputs", nargs="+", metavar="VIDEO",
                     help="video file, folder of images, .npy array, or a generated stimulus "
                          "'stim:NAME[?coherence=C&seed=S&size=N...]' (see cdnf_ti.inputs)")
-    ap.add_argument("--out", default="cdnf_out", help="output folder for traces (default: %(default)s)")
+    add_output_option(ap)
     add_model_options(ap)
     add_param_options(ap)
-    ap.add_argument("--fps", type=positive_float, default=None,
-                    help="frame rate of the inputs in frames/s (default: a video's own rate; 30 for image "
-                         "folders and .npy arrays, which carry none)")
-    ap.add_argument("--color-order", choices=("bgr", "rgb"), default="bgr",
-                    help="channel order of colour .npy arrays (default: %(default)s, as OpenCV; arrays "
-                         "from imageio, PIL or matplotlib are rgb). Video files and images are decoded by "
-                         "OpenCV and are always right")
+    add_input_options(ap)
+    add_rain_options(ap, default="off")
+    add_seed_options(ap, rain=True)
     ap.add_argument("--no-progress", action="store_true", help="hide progress bars")
-    ap.add_argument("--rain", action="store_true",
-                    help="add synthetic rain (paper defaults) in memory; prints each video's SNR")
-    ap.add_argument("--rain-seed", type=seed_arg, default=0, help="rain seed (default: %(default)s)")
-    ap.add_argument("--rain-drops", type=drops_arg, default=None,
-                    help="rain droplets per frame (default: 500 per 426x240, scaled by area)")
     return ap
 
 
 def run_videos(argv: Sequence[str]) -> int:
-    """Run models over each input, write ``OUT/<clip>.<model>.csv`` and print one line each.
+    """Run models over each input, write ``OUT/<clip>.<model>[.rain].csv`` and print one line each.
 
     Inputs that share a name get distinct output names (:func:`unique_names`).
     """
-    args = _videos_parser().parse_args(argv)
+    args = _videos_parser().parse_args(list(argv))
+    note_unused_rain_options(args)
     models = parse_models(args.models)
     check_model_options(args)
     params = params_from_args(args, models)
@@ -118,11 +126,15 @@ def run_videos(argv: Sequence[str]) -> int:
     return code
 
 
+def _error_row(index: int, path, clip: str, model: str, condition: str, problem: str) -> dict:
+    return {"_i": index, "input": str(path), "clip": clip, "model": model, "condition": condition,
+            "status": f"error: {problem}".splitlines()[0]}
+
+
 def _run_videos(args, models: list[str], params: dict, out: Path, write_text) -> int:
-    rain_params = None
-    if args.rain:
-        rain_params = RainParams(drops=args.rain_drops)
-    condition = "rain" if args.rain else "clean"
+    conditions = rain_conditions(args)
+    rain_params = RainParams(drops=args.rain_drops) if "rain" in conditions else None
+    rain_seed = rain_seed_of(args)
     summary: list[dict] = []  # rows in input order ("_i": index of the input)
     sources: list = []
     order: list[int] = []
@@ -137,8 +149,8 @@ def _run_videos(args, models: list[str], params: dict, out: Path, write_text) ->
         except UserError as e:
             print(f"error: {e}", file=sys.stderr)
             problem = e.problem if isinstance(e, InputError) else str(e)
-            summary.append({"_i": index, "input": str(path), "clip": Path(str(path)).stem,
-                            "model": ",".join(models), "condition": condition, "status": f"error: {problem}"})
+            summary += [_error_row(index, path, Path(str(path)).stem, ",".join(models), c, problem)
+                        for c in conditions]
     if not sources:  # nothing could be opened: leave the output folder (and a summary of an earlier run) as it was
         return EXIT_USAGE
     names = unique_names([str(p) for p, _ in sources], [src.name for _, src in sources])
@@ -148,53 +160,11 @@ def _run_videos(args, models: list[str], params: dict, out: Path, write_text) ->
               file=sys.stderr)
     ran = 0
     for (path, src), clip, index in zip(sources, names, order):
-        instances = [create_model(name, params[name], backend=args.backend,
-                                  arch=args.arch, fps=src.fps) for name in models]
-        rain = None
-        errors: list = []
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", NotConvergedWarning)  # reported per line below
-                frames = iter_grey(src)
-                if rain_params is not None:
-                    rain = RainyFrames(frames, rain_params, seed=args.rain_seed)
-                    frames = iter(rain)
-                # one pass over the input: each frame is decoded (and rained on) once for all models
-                traces = run_models(instances, frames, total=src.n_frames, errors=errors,
-                                    progress=False if args.no_progress else f"{clip} [{', '.join(models)}]")
-        except InputError as e:
-            print(f"error: {e}", file=sys.stderr)
-            summary.append({"_i": index, "input": str(path), "clip": clip, "model": ",".join(models),
-                            "condition": condition, "status": f"error: {e.problem}"})
-            continue
-        for name, trace, err in zip(models, traces, errors):
-            if err is not None:
-                msg = str(err) if isinstance(err, UserError) else f"{type(err).__name__}: {err}"
-                print(f"error: {path} [{name}]: {msg}".splitlines()[0], file=sys.stderr)
-                summary.append({"_i": index, "input": str(path), "clip": clip, "model": name,
-                                "condition": condition, "status": f"error: {msg}".splitlines()[0]})
-                continue
-            ran += 1
-            trace_name = trace_file_name(clip, name, condition)
-            trace.to_csv(out / trace_name)
-            fa = trace.first_alert
-            fa_txt = f"{fa} ({fa / src.fps:.2f} s)" if fa is not None else "none"
-            unconv = int((~trace.converged).sum())
-            note = f", {unconv} frames NOT converged" if unconv else ""
-            if rain is not None:
-                note += f", rain SNR {rain.snr_db:.2f} dB"
-            fps = trace.fps
-            fps_txt = f"{fps:.1f} fps" if math.isfinite(fps) else "n/a fps (one frame)"
-            out_name = "" if clip == src.name else f" -> {clip}"
-            print(f"{path}{out_name} [{name}]: {trace.n_frames} frames, first alert {fa_txt}, "
-                  f"max {trace.output_name} {trace.output.max():.4f}, {fps_txt}{note}")
-            summary.append({"_i": index, "input": str(path), "clip": clip, "model": name, "condition": condition,
-                            "params": params_text(instances[models.index(name)]), "trace": trace_name,
-                            "frames": trace.n_frames, "video_fps": f"{src.fps:g}",
-                            "first_alert": "" if fa is None else fa, "max_output": f"{trace.output.max():.6f}",
-                            "proc_fps": f"{fps:.2f}" if math.isfinite(fps) else "",
-                            "status": "ok" if not unconv else "unconverged",
-                            "rain_snr_db": f"{rain.snr_db:.4f}" if rain is not None else ""})
+        for condition in conditions:
+            rows, n_ok = _run_one(args, models, params, out, path, src, clip, index, condition,
+                                  rain_params if condition == "rain" else None, rain_seed)
+            summary += rows
+            ran += n_ok
     merge_summary(out / "summary.csv", sorted(summary, key=lambda r: r["_i"]), write_text)
     print(f"results in {out}/ (summary.csv lists every run made into this folder)", file=sys.stderr)
     n_failed = sum(1 for r in summary if str(r.get("status", "")).startswith("error"))
@@ -203,9 +173,72 @@ def _run_videos(args, models: list[str], params: dict, out: Path, write_text) ->
     return EXIT_FAILED if ran else EXIT_USAGE
 
 
+def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, condition: str,
+             rain_params, rain_seed: int) -> tuple[list[dict], int]:
+    """Every model on one input under one condition: traces written, one line printed per model.
+
+    Returns the summary rows and how many models finished.
+    """
+    instances = [create_model(name, params[name], backend=args.backend, arch=args.arch, fps=src.fps)
+                 for name in models]
+    rain = None
+    errors: list = []
+    label = clip if condition == "clean" else f"{clip} ({condition})"
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NotConvergedWarning)  # reported per line below
+            frames = iter_grey(src)
+            if rain_params is not None:
+                rain = RainyFrames(frames, rain_params, seed=rain_seed)
+                frames = iter(rain)
+            # one pass over the input: each frame is decoded (and rained on) once for all models
+            traces = run_models(instances, frames, total=src.n_frames, errors=errors,
+                                progress=False if args.no_progress else f"{label} [{', '.join(models)}]")
+    except InputError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return [_error_row(index, path, clip, ",".join(models), condition, e.problem)], 0
+    rows = []
+    ran = 0
+    for name, model, trace, err in zip(models, instances, traces, errors):
+        if err is not None:
+            msg = str(err) if isinstance(err, UserError) else f"{type(err).__name__}: {err}"
+            print(f"error: {path} [{name}]: {msg}".splitlines()[0], file=sys.stderr)
+            rows.append(_error_row(index, path, clip, name, condition, msg))
+            continue
+        ran += 1
+        trace_name = trace_file_name(clip, name, condition)
+        trace.to_csv(out / trace_name)
+        alert = alert_summary(trace, getattr(model, "params", None), src.fps)
+        fa = alert.first_alert
+        fa_txt = f"{fa} ({alert.first_alert_s:.2f} s)" if fa is not None else "none"
+        unconv = int((~trace.converged).sum())
+        note = f", {unconv} frames NOT converged" if unconv else ""
+        if rain is not None:
+            note += f", rain SNR {rain.snr_db:.2f} dB"
+        fps = trace.fps
+        fps_txt = f"{fps:.1f} fps" if math.isfinite(fps) else "n/a fps (one frame)"
+        out_name = "" if clip == src.name else f" -> {clip}"
+        cond_txt = "" if condition == "clean" else f" ({condition})"
+        extra = "" if alert.quantity == trace.output_name else f" (max {trace.output_name} {trace.output.max():.4f})"
+        print(f"{path}{out_name} [{name}]{cond_txt}: {trace.n_frames} frames, first alert {fa_txt}; "
+              f"{alert.text()}{extra}; {fps_txt}{note}")
+        rows.append({"_i": index, "input": str(path), "clip": clip, "model": name, "condition": condition,
+                     "params": params_text(model), "trace": trace_name,
+                     "frames": trace.n_frames, "video_fps": f"{src.fps:g}",
+                     "first_alert": "" if fa is None else fa,
+                     "first_alert_s": "" if alert.first_alert_s is None else f"{alert.first_alert_s:.4f}",
+                     "alert_rule": alert.rule, "alert_peak": f"{alert.peak:.6g}", "alert_level": f"{alert.level:g}",
+                     "max_output": f"{trace.output.max():.6f}",
+                     "proc_fps": f"{fps:.2f}" if math.isfinite(fps) else "",
+                     "status": "ok" if not unconv else "unconverged",
+                     "rain_snr_db": f"{rain.snr_db:.4f}" if rain is not None else ""})
+    return rows, ran
+
+
 #: Columns of ``run``'s summary.csv, in order (see the README's table of CSV columns).
 SUMMARY_COLUMNS = ("input", "clip", "model", "condition", "params", "trace", "frames", "video_fps", "first_alert",
-                   "max_output", "proc_fps", "status", "rain_snr_db")
+                   "first_alert_s", "alert_rule", "alert_peak", "alert_level", "max_output", "proc_fps", "status",
+                   "rain_snr_db")
 
 
 def trace_file_name(clip: str, model: str, condition: str) -> str:
@@ -301,6 +334,17 @@ def _load(target: str) -> Callable[[Sequence[str]], int]:
     return getattr(importlib.import_module(mod), fn)
 
 
+def _looks_like_input(path: str) -> bool:
+    """Whether ``path`` (a subcommand's name) is also a file, or a folder of images, that ``run`` could read."""
+    p = Path(path)
+    try:
+        if p.is_file():
+            return True
+        return p.is_dir() and any(f.suffix.lower() in IMAGE_EXTENSIONS for f in p.iterdir())
+    except OSError:
+        return False
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code (see the module docstring).
 
@@ -315,7 +359,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         lanes_override()  # a bad $CDNF_TI_LANES is one line now, not one error per clip later
         if not argv:
             return _load(SUBCOMMANDS["demo"])([])
+        if argv[0] == "run":
+            return run_videos(argv[1:])
         if argv[0] in SUBCOMMANDS:
+            if _looks_like_input(argv[0]):
+                print(f"note: {argv[0]!r} is taken as the subcommand; to run the input of that name, write "
+                      f"'run {argv[0]}' or '{argv[0]}{os.sep}'", file=sys.stderr)
             return _load(SUBCOMMANDS[argv[0]])(argv[1:])
         return run_videos(argv)
     except UserError as e:

@@ -36,8 +36,10 @@ def test_render_writes_a_playable_mp4_with_one_frame_per_input_frame(tmp_path):
 
     n_in = resolve_input("stim:dark_looming?size=64").n_frames
     assert len(frames) == n == n_in
-    # four 64x64 panels (2 x 2) above the trace panel
-    assert (w, h) == (128, 128 + 170) and frames[0].shape == (h, w, 3)
+    from cdnf_ti.render import CBAR_W, TRACE_H
+
+    # four 64x64 panels (2 x 2), each with its colour bar on the right, above the trace panel
+    assert (w, h) == (2 * (64 + CBAR_W), 128 + TRACE_H) and frames[0].shape == (h, w, 3)
     # the fields change as the square looms: the last frame's field panels differ from the first's
     assert np.abs(frames[-1][:128].astype(int) - frames[1][:128].astype(int)).mean() > 1.0
 
@@ -97,3 +99,61 @@ def test_other_models_render_too(tmp_path, model):
     n = render_video("stim:dark_looming?size=32", model, tmp_path / "m.mp4", backend="numpy")
     frames, m, _w, _h = _read_all(tmp_path / "m.mp4")
     assert n == m == len(frames) > 10
+
+
+def test_render_makes_one_movie_per_model_and_condition(tmp_path, capsys):
+    from cdnf_ti.run import main
+
+    rc = main(["render", "stim:dark_looming?size=32", "--model", "cdnf,lgmd2", "--rain", "both", "--rain-drops", "10",
+               "--out", str(tmp_path), "--no-progress"])
+    assert rc == 0
+    names = sorted(p.name for p in tmp_path.glob("*.mp4"))
+    assert names == ["dark_looming_size32.cdnf.mp4", "dark_looming_size32.cdnf.rain.mp4",
+                     "dark_looming_size32.lgmd2.mp4", "dark_looming_size32.lgmd2.rain.mp4"]
+
+
+def test_render_out_names_a_movie_file_only_when_one_movie_is_made(tmp_path, capsys):
+    from cdnf_ti.run import main
+
+    rc = main(["render", "stim:dark_looming?size=32", "--model", "cdnf,lgmd2", "--out", str(tmp_path / "m.mp4"),
+               "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.startswith("error: ") and "give a folder" in err and err.count("\n") == 1
+    assert not (tmp_path / "m.mp4").exists()
+
+
+def test_render_rejects_an_unknown_param_before_any_work(tmp_path, capsys):
+    from cdnf_ti.run import main
+
+    rc = main(["render", "stim:dark_looming?size=32", "--param", "nosuch=1", "--out", str(tmp_path / "o"),
+               "--no-progress"])
+    assert rc == 2 and "nosuch" in capsys.readouterr().err and not (tmp_path / "o").exists()
+
+
+def test_colour_bars_keep_one_scale_through_the_movie(tmp_path):
+    from cdnf_ti.render import CBAR_W, render_video
+
+    out = tmp_path / "m.avi"  # lossless: the pixels read back are the pixels drawn
+    render_video("stim:dark_looming?size=48", "cdnf", out, backend="numpy")
+    frames, _n, _w, _h = _read_all(out)
+    # the bar of the Summation panel (bottom right): its colours and labels are the same in every frame
+    bars = [f[48:96, 2 * 48 + CBAR_W:] for f in frames]
+    assert all(np.array_equal(bars[0], b) for b in bars[1:])
+    assert bars[0].std() > 10  # it is a bar, not an empty strip
+
+
+def test_field_ranges_hold_the_values_of_every_frame():
+    from cdnf_ti.frames import iter_grey
+    from cdnf_ti.inputs import resolve_input
+    from cdnf_ti.models import create_model
+    from cdnf_ti.render import field_ranges, robust_range
+
+    src = resolve_input("stim:dark_looming?size=32")
+    model = create_model("cdnf", backend="numpy")
+    ranges = field_ranges(model, iter_grey(src))
+    model.reset()
+    for frame in iter_grey(src):
+        model.step(frame)
+        for key, (lo, hi) in ranges.items():
+            flo, fhi = robust_range(model.fields()[key])
+            assert lo <= flo and fhi <= hi

@@ -56,6 +56,7 @@ class StimulusTask:
     backend: str = "taichi"
     arch: str = "cpu"
     scatter: str = "flicker"
+    params: Any = None  # the model's parameter object (--param); None: its defaults
 
     @property
     def trace_file(self) -> Path:
@@ -83,7 +84,7 @@ def run_stimulus_task(task: StimulusTask) -> dict:
         init_worker(task.arch)
     stim = make_stimulus(task.stimulus, task.size, task.coherence, task.seed, task.scatter)
     fps = float(getattr(stim, "fps", 30.0))
-    model = create_model(task.model, backend=task.backend, arch=task.arch, fps=fps)
+    model = create_model(task.model, task.params, backend=task.backend, arch=task.arch, fps=fps)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NotConvergedWarning)  # recorded per frame in "converged"
         tr = model.run(_frames_of(stim), progress=False)
@@ -115,7 +116,7 @@ def _run(tasks: list[StimulusTask], workers, scheduler, arch, progress, label) -
 
 def table1(models: Sequence[str], out: str | Path, size: int = 160, seed: int = 0, workers: int | None = None,
            scheduler: Any = None, backend: str = "taichi", arch: str = "cpu", progress: bool = True,
-           figures: bool = True) -> dict:
+           figures: bool = True, params: dict | None = None) -> dict:
     """Paper Table I: each model on the six basic stimuli; writes table1.md/json and Fig. 2 panel.
 
     Returns
@@ -124,7 +125,8 @@ def table1(models: Sequence[str], out: str | Path, size: int = 160, seed: int = 
         ``result[model][stimulus] = {"alert", "first_alert", "max_output", ...}``.
     """
     out = Path(out)
-    tasks = [StimulusTask(m, s, size, None, seed, str(out), backend, arch) for m in models for s in BASIC_STIMULI]
+    tasks = [StimulusTask(m, s, size, None, seed, str(out), backend, arch, params=(params or {}).get(m))
+             for m in models for s in BASIC_STIMULI]
     recs = _run(tasks, workers, scheduler, arch, progress, "table1")
     res: dict[str, dict[str, dict]] = {m: {} for m in models}
     for r in recs:
@@ -145,7 +147,8 @@ def table1(models: Sequence[str], out: str | Path, size: int = 160, seed: int = 
 def coherence_sweep(models: Sequence[str], out: str | Path, size: int = 160,
                     coherences: Sequence[float] = COHERENCES, seed: int = 0, workers: int | None = None,
                     scheduler: Any = None, backend: str = "taichi", arch: str = "cpu", progress: bool = True,
-                    figures: bool = True, stimuli: Sequence[str] | None = None, scatter: str = "flicker") -> dict:
+                    figures: bool = True, stimuli: Sequence[str] | None = None, scatter: str = "flicker",
+                    params: dict | None = None) -> dict:
     """Fig. 4: each model on each incoherent stimulus at each coherence; writes coherence.md/json/csv + figure.
 
     ``scatter`` picks the incoherent construction (``flicker`` or ``static``,
@@ -162,7 +165,8 @@ def coherence_sweep(models: Sequence[str], out: str | Path, size: int = 160,
     stimuli = list(stimuli or BASIC_STIMULI)
     out = Path(out)
     make_stimulus(stimuli[0], 16, coherences[0], seed, scatter)  # fail early: missing stimuli, bad scatter
-    tasks = [StimulusTask(m, s, size, float(c), seed, str(out), backend, arch, scatter)
+    tasks = [StimulusTask(m, s, size, float(c), seed, str(out), backend, arch, scatter,
+                          params=(params or {}).get(m))
              for s in stimuli for c in coherences for m in models]
     recs = _run(tasks, workers, scheduler, arch, progress, "coherence")
     table: dict[str, dict[str, dict[float, dict]]] = {s: {m: {} for m in models} for s in stimuli}

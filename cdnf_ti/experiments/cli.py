@@ -18,7 +18,23 @@ from pathlib import Path
 from typing import Sequence
 
 from ..atomic import output_lock, prepare_output
-from ..cli_common import ArgumentParser, add_model_options, check_model_options, parse_models, seed_arg
+from ..cli_common import (
+    RAIN_ENGINE_WORD,
+    ArgumentParser,
+    add_input_options,
+    add_model_options,
+    add_output_option,
+    add_param_options,
+    add_rain_options,
+    add_seed_options,
+    check_model_options,
+    note,
+    note_unused_rain_options,
+    params_from_args,
+    parse_models,
+    rain_seed_of,
+    stimulus_seed_of,
+)
 from ..demo import format_table1
 from ..errors import InputError, UserError
 from ..limits import check_frame_size
@@ -27,6 +43,7 @@ from ..stimuli.basic import BASIC_STIMULI
 from ..stimuli.incoherent import SCATTERS
 from . import builtin
 from .dataset import run_dataset
+from .labels import drop_missing, read_labels
 from .paramsweep import run_param_sweep
 from .reports import pct, table2_markdown
 from .scoring import Padding
@@ -45,35 +62,70 @@ def _nonneg_int(text: str) -> int:
     return v
 
 
-def _add_parallel(ap: argparse.ArgumentParser) -> None:
+def _add_parallel(ap: argparse.ArgumentParser, rain: bool = False, stimulus: bool = False) -> None:
     ap.add_argument("--workers", type=_nonneg_int, default=None,
                     help="local worker processes (default: one per CPU core; 0 or 1: run in this process)")
     ap.add_argument("--scheduler", default=None, metavar="ADDRESS",
                     help="Dask distributed scheduler address (e.g. tcp://10.0.0.5:8786): run the tasks there")
-    ap.add_argument("--seed", type=seed_arg, default=0, help="random seed (rain, incoherent stimuli; default 0)")
+    add_seed_options(ap, rain=rain, stimulus=stimulus)
     ap.add_argument("--no-progress", action="store_true", help="hide progress bars")
     ap.add_argument("--no-figures", action="store_true", help="do not draw figures")
 
 
-def _add_dataset_options(ap: argparse.ArgumentParser, rain_default: str) -> None:
+def _add_dataset_options(ap: argparse.ArgumentParser, rain_default: str, one_model: bool = False) -> None:
     ap.add_argument("--labels", default=None, help="labels CSV (default: DIR/labels.csv)")
-    add_model_options(ap, default_models="cdnf" if rain_default == "none" else "all")
-    ap.add_argument("--rain", choices=("none", "only", "both"), default=rain_default,
-                    help="clean clips, clips with synthetic rain, or both (default: %(default)s)")
+    if one_model:
+        add_model_options(ap, default_models="cdnf")
+        ap.set_defaults(models="cdnf")
+        for a in ap._actions:  # the sweep runs one model: say so
+            if a.dest == "models":
+                a.help = "the one model whose parameters are swept (default: cdnf)"
+    else:
+        add_model_options(ap, default_models="cdnf" if rain_default == "off" else "all")
+    if not one_model:  # (the sweep reads clips as they are and needs every labelled clip)
+        add_param_options(ap)
+        add_input_options(ap)
+    add_rain_options(ap, default=rain_default, what="each clip", drops=not one_model)
+    if not one_model:
+        ap.add_argument("--skip-missing", action="store_true",
+                        help="run the clips whose video exists and leave out label rows naming a missing video "
+                             "(a note lists them; default: a missing video is an error and nothing runs)")
     ap.add_argument("--pad-before", type=_nonneg_int, default=0, metavar="N",
                     help="frames of tolerance before each window start (default 0)")
     ap.add_argument("--pad-after", type=_nonneg_int, default=0, metavar="N",
                     help="frames of tolerance after each window end (default 0)")
-    _add_parallel(ap)
+    _add_parallel(ap, rain=True)
+
+
+def _rain_params(args) -> dict | None:
+    """``RainParams`` keywords from ``--rain-drops`` (None: the paper's defaults)."""
+    return None if args.rain_drops is None else {"drops": args.rain_drops}
+
+
+def _skip_missing(args, folder: Path) -> None:
+    """``--skip-missing``: say which label rows name a missing video (and stop when every one does)."""
+    if not getattr(args, "skip_missing", False):
+        return
+    labels_path = Path(args.labels) if args.labels else folder / "labels.csv"
+    kept, missing = drop_missing(read_labels(labels_path), folder)
+    if missing:
+        shown = ", ".join(missing[:10]) + (", ..." if len(missing) > 10 else "")
+        note(f"--skip-missing: {len(missing)} labelled clip(s) have no video in {folder} and are left out: {shown}")
+    if not kept:
+        raise InputError(labels_path, f"no labelled clip has a video in {folder}")
 
 
 def _dataset(args, folder: Path, out: Path) -> int:
+    note_unused_rain_options(args)
     models = parse_models(args.models)
     check_model_options(args)
-    run = run_dataset(folder, args.labels, out, models=models, rain=args.rain,
-                      padding=Padding(args.pad_before, args.pad_after), seed=args.seed, workers=args.workers,
-                      scheduler=args.scheduler, backend=args.backend, arch=args.arch,
-                      progress=not args.no_progress, figures=not args.no_figures)
+    params = params_from_args(args, models)
+    _skip_missing(args, folder)
+    run = run_dataset(folder, args.labels, out, models=models, rain=RAIN_ENGINE_WORD[args.rain],
+                      padding=Padding(args.pad_before, args.pad_after), seed=rain_seed_of(args),
+                      workers=args.workers, scheduler=args.scheduler, backend=args.backend, arch=args.arch,
+                      progress=not args.no_progress, figures=not args.no_figures, rain_params=_rain_params(args),
+                      params=params, fps=args.fps, color_order=args.color_order, skip_missing=args.skip_missing)
     print(table2_markdown(run.summary["results"], run.models, run.conditions))
     for line in headline(run):
         print(line)
@@ -87,10 +139,12 @@ def _dataset(args, folder: Path, out: Path) -> int:
         print(f"error: {e['error']} [{e['model']}, {e['condition']}]", file=sys.stderr)
 
     if getattr(args, "render", False):
-        movies = render_dataset(run, folder, progress=not args.no_progress)
+        movies = render_dataset(run, folder, progress=not args.no_progress, params=params, fps=args.fps,
+                                color_order=args.color_order, backend=args.backend, arch=args.arch)
         print(f"{len(movies)} field movies in {out}/movies/", file=sys.stderr)
     if run.failed:
-        print(f"{run.n_errors} clip/model run(s) failed; see {out}/results.csv", file=sys.stderr)
+        print(f"{run.n_errors} of {len(run.rows)} clip x model x condition run(s) failed; see {out}/results.csv",
+              file=sys.stderr)
         return EXIT_FAILED
     return EXIT_OK
 
@@ -119,8 +173,9 @@ def _param_sweep(args) -> int:
     folder = Path(args.folder)
     if not folder.is_dir():
         raise InputError(folder, "dataset folder not found")
-    run = run_param_sweep(folder, args.labels, Path(args.out), models[0], args.param, rain=args.rain,
-                          padding=Padding(args.pad_before, args.pad_after), seed=args.seed, folds=args.folds,
+    run = run_param_sweep(folder, args.labels, Path(args.out), models[0], args.param,
+                          rain=RAIN_ENGINE_WORD[args.rain], padding=Padding(args.pad_before, args.pad_after),
+                          seed=rain_seed_of(args), folds=args.folds,
                           workers=args.workers, scheduler=args.scheduler, backend=args.backend, arch=args.arch,
                           progress=not args.no_progress, figures=not args.no_figures, downscale=args.downscale,
                           html=not args.no_html)
@@ -140,10 +195,10 @@ def dataset_main(argv: Sequence[str]) -> int:
                     "them (docs/EVALUATION.md) and write traces, results.csv, summary.md/json and "
                     "figures. Rerunning with the same OUT skips finished work.")
     ap.add_argument("folder", metavar="DIR", help="folder of videos")
-    ap.add_argument("--out", required=True, help="output folder")
+    add_output_option(ap, default="cdnf_out/dataset")
     ap.add_argument("--render", action="store_true",
                     help="also write a field movie of each scored clip and model (OUT/movies/<clip>.<model>.mp4)")
-    _add_dataset_options(ap, rain_default="none")
+    _add_dataset_options(ap, rain_default="off")
     args = ap.parse_args(list(argv))
     folder = Path(args.folder)
     if not folder.exists():
@@ -164,10 +219,11 @@ def _selectivity(args) -> int:
             if not (0 < c <= 1):
                 raise UserError(f"coherence must be in (0, 1], got {c:g}")
     classes = [c.strip() for c in args.classes.split(",")] if args.classes else None
-    res = selectivity_sweep(parse_models(args.models), args.out, which=args.grid, coherences=coh,
-                            seed=args.seed, workers=args.workers, scheduler=args.scheduler, backend=args.backend,
-                            arch=args.arch, progress=not args.no_progress, figures=not args.no_figures,
-                            classes=classes)
+    models = parse_models(args.models)
+    res = selectivity_sweep(models, args.out, which=args.grid, coherences=coh, params=args.model_params,
+                            seed=stimulus_seed_of(args), workers=args.workers, scheduler=args.scheduler,
+                            backend=args.backend, arch=args.arch, progress=not args.no_progress,
+                            figures=not args.no_figures, classes=classes)
     print(agreement_markdown(res["rows"]))
     errs = [r for r in res["rows"] if r.get("error")]
     for r in errs:
@@ -185,14 +241,15 @@ def experiment_main(argv: Sequence[str]) -> int:
     p1 = sub.add_parser("table1", help="basic selectivity on the six basic stimuli (Table I, Fig. 2)")
     p2 = sub.add_parser("coherence", help="coherence sweep on the six incoherent stimuli (Fig. 4)")
     for p, name in ((p1, "table1"), (p2, "coherence")):
-        p.add_argument("--out", default=f"cdnf_experiments/{name}", help="output folder (default: %(default)s)")
+        add_output_option(p, default=f"cdnf_experiments/{name}")
         add_model_options(p, default_models="all")
+        add_param_options(p)
         p.add_argument("--size", type=int, default=160,
                        help="frame side in px (default: %(default)s, so that the whole experiment runs in "
                             "minutes; the paper and `demo` use 600 and the stimuli scale with the size, "
                             "but a model's alert can differ near its threshold; use --size 600 to "
                             "reproduce the paper exactly)")
-        _add_parallel(p)
+        _add_parallel(p, stimulus=True)
     p2.add_argument("--coherences", default=",".join(f"{c:g}" for c in builtin.COHERENCES),
                     help="comma-separated coherence degrees in (0, 1] (default: %(default)s)")
     p2.add_argument("--stimuli", default=None, help="comma-separated basic stimuli (default: all six)")
@@ -201,8 +258,9 @@ def experiment_main(argv: Sequence[str]) -> int:
                          "elsewhere (flicker, default) or pass to an entering source and stay put (static)")
     p4 = sub.add_parser("selectivity", help="every model against Table I over a grid of stimulus settings "
                                              "(sizes, speeds, grey levels, gratings, coherences)")
-    p4.add_argument("--out", default="cdnf_experiments/selectivity", help="output folder (default: %(default)s)")
+    add_output_option(p4, default="cdnf_experiments/selectivity")
     add_model_options(p4, default_models="all")
+    add_param_options(p4)
     grid_size = p4.add_mutually_exclusive_group()
     grid_size.add_argument("--quick", dest="grid", action="store_const", const="quick", default="quick",
                            help="small grid, base 120 px (default; a few minutes on 2 cores)")
@@ -212,17 +270,17 @@ def experiment_main(argv: Sequence[str]) -> int:
                     help="coherences of the incoherent versions (default: 0.5 quick; 0.8,0.5,0.2 full)")
     p4.add_argument("--classes", default=None,
                     help="comma-separated stimulus classes (looming,receding,translating,grating; default: all)")
-    _add_parallel(p4)
+    _add_parallel(p4, stimulus=True)
     p3 = sub.add_parser("table2", help="accuracy on a labelled folder, clean and with synthetic rain (Table II)")
     p3.add_argument("folder", nargs="?", default=None, metavar="DIR",
                     help="folder of videos with labels.csv (default: the development clips, shared/data/real "
                          "beside the repository, when present)")
-    p3.add_argument("--out", default="cdnf_experiments/table2", help="output folder (default: %(default)s)")
+    add_output_option(p3, default="cdnf_experiments/table2")
     _add_dataset_options(p3, rain_default="both")
-    p4 = sub.add_parser("sweep", help="a grid of one model's parameters over a labelled folder: accuracy, "
+    p4 = sub.add_parser("sweep", help="a grid of ONE model's parameters over a labelled folder: accuracy, "
                                       "ROC AUC and cross-validated accuracy per setting")
     p4.add_argument("folder", metavar="DIR", help="folder of videos with labels.csv")
-    p4.add_argument("--out", default="cdnf_experiments/sweep", help="output folder (default: %(default)s)")
+    add_output_option(p4, default="cdnf_experiments/sweep")
     p4.add_argument("--param", action="append", default=[], metavar="NAME=SPEC",
                     help="a parameter of the model and its values: NAME=START:STOP:N (N values, ends included), "
                          "NAME=V1,V2,... or NAME=V; repeat for a grid")
@@ -232,11 +290,13 @@ def experiment_main(argv: Sequence[str]) -> int:
     p4.add_argument("--downscale", type=float, default=1.0,
                     help="resize every frame by this factor in (0, 1] (default 1: native size)")
     p4.add_argument("--no-html", action="store_true", help="do not write report.html")
-    _add_dataset_options(p4, rain_default="none")
+    _add_dataset_options(p4, rain_default="off", one_model=True)
     args = ap.parse_args(list(argv))
 
     if args.which in ("sweep", "selectivity"):
         check_model_options(args)
+        if args.which == "selectivity":  # checked before the output folder is made
+            args.model_params = params_from_args(args, parse_models(args.models))
         with output_lock(prepare_output(args.out)):
             return _param_sweep(args) if args.which == "sweep" else _selectivity(args)
     if args.which == "table2":
@@ -250,14 +310,16 @@ def experiment_main(argv: Sequence[str]) -> int:
     check_frame_size(args.size, args.size, n_models=1, what="--size")
     models = parse_models(args.models)
     check_model_options(args)
+    args.model_params = params_from_args(args, models)
     out = prepare_output(args.out)  # before any work
     with output_lock(out):
         return _stimulus_experiment(args, models, builtin)
 
 
 def _stimulus_experiment(args, models, builtin) -> int:
-    kw = dict(size=args.size, seed=args.seed, workers=args.workers, scheduler=args.scheduler,
-              backend=args.backend, arch=args.arch, progress=not args.no_progress, figures=not args.no_figures)
+    kw = dict(size=args.size, seed=stimulus_seed_of(args), params=args.model_params, workers=args.workers,
+              scheduler=args.scheduler, backend=args.backend, arch=args.arch, progress=not args.no_progress,
+              figures=not args.no_figures)
     if args.which == "table1":
         res = builtin.table1(models, args.out, **kw)
         print(format_table1(res))

@@ -25,11 +25,12 @@ from typing import Any, Callable, Sequence
 from ..atomic import atomic_write_json, output_lock, prepare_output, remove_stale_temps
 from ..errors import InputError, UserError
 from ..frames import iter_grey, open_source
+from ..limits import check_frame_size
 from ..models import create_model
 from ..models.base import NotConvergedWarning, run_models
 from ..stimuli.rain import RainParams, RainyFrames
 from . import parallel  # parallel.map_tasks looked up at call time (tests replace it)
-from .labels import ClipLabel, read_labels, unlabelled_videos, validate_dataset
+from .labels import ClipLabel, drop_missing, read_labels, unlabelled_videos, validate_dataset
 from .layout import (
     CONDITIONS as CONDITIONS,  # re-exported: dataset.py was their home
     RAIN_CHOICES as RAIN_CHOICES,
@@ -64,6 +65,10 @@ class ClipTask:
         Model backend and Taichi arch.
     rain_params : dict or None
         Keyword arguments of ``RainParams``.
+    params : dict or None
+        ``{model: parameter object or None}`` (``--param``); absent models keep their defaults.
+    fps, color_order :
+        How the clip is read (:func:`~cdnf_ti.frames.open_source`; ``--fps``, ``--color-order``).
     """
 
     clip: str
@@ -75,6 +80,31 @@ class ClipTask:
     backend: str = "taichi"
     arch: str = "cpu"
     rain_params: dict | None = None
+    params: dict | None = None
+    fps: float | None = None
+    color_order: str = "bgr"
+
+    def fingerprint(self, model: str) -> dict:
+        """The :func:`~cdnf_ti.experiments.layout.fingerprint` of this task's ``model``."""
+        return fingerprint(self.path, self.condition, model, self.seed, self.backend, self.rain_params, self.arch,
+                           run_options(model, self.params, self.fps, self.color_order))
+
+
+def run_options(model: str, params: dict | None, fps: float | None, color_order: str) -> dict:
+    """What a trace depends on beside the input and code, where not the defaults: the model's
+    parameters (``--param``), the frame rate (``--fps``) and the colour order (``--color-order``)."""
+    opts: dict[str, Any] = {}
+    p = (params or {}).get(model)
+    if p is not None and hasattr(p, "to_dict"):
+        default = type(p)().to_dict()
+        changed = {k: v for k, v in p.to_dict().items() if default.get(k) != v}
+        if changed:
+            opts["params"] = changed
+    if fps is not None:
+        opts["fps"] = float(fps)
+    if color_order != "bgr":
+        opts["color_order"] = color_order
+    return opts
 
 
 def _frames(task: ClipTask, src):
@@ -113,14 +143,19 @@ def run_clip_task(task: ClipTask) -> list[dict]:
         return [dict(base, model=m, error=msg.splitlines()[0] if msg else type(e).__name__) for m in names]
 
     try:
-        src = open_source(task.path)
+        src = open_source(task.path, fps=task.fps, color_order=task.color_order)
+        try:
+            check_frame_size(*src.shape, n_models=len(task.models), what=str(task.path))
+        except UserError as e:  # frames smaller than the widest kernel: that clip's error rows
+            raise InputError(task.path, str(e).split(": ", 1)[-1]) from None
     except InputError as e:
         return failed(task.models, e)
     records: dict[str, dict] = {}
     names, instances = [], []
     for name in task.models:
         try:
-            instances.append(create_model(name, backend=task.backend, arch=task.arch, fps=src.fps))
+            instances.append(create_model(name, (task.params or {}).get(name), backend=task.backend, arch=task.arch,
+                                          fps=src.fps))
             names.append(name)
         except Exception as e:  # noqa: BLE001 - one model's failure is that model's error row
             records.update((r["model"], r) for r in failed([name], e))
@@ -149,8 +184,7 @@ def run_clip_task(task: ClipTask) -> list[dict]:
                 unconverged_frames=int((~trace.converged).sum()), seconds=round(float(trace.seconds), 3),
                 source=str(task.path), seed=task.seed if rain is not None else None,
                 rain_seed=rain_seed(task.seed, task.clip) if rain is not None else None, error="",
-                fingerprint=fingerprint(task.path, task.condition, name, task.seed, task.backend,
-                                        task.rain_params, task.arch),
+                fingerprint=task.fingerprint(name),
             )
             trace.to_csv(trace_path(task.out, task.condition, task.clip, name))
             atomic_write_json(trace_path(task.out, task.condition, task.clip, name, "json"), meta)
@@ -231,7 +265,7 @@ def build_row(label: ClipLabel, model: str, condition: str, meta: dict | None, p
     fa = meta.get("first_alert")
     sc = score_clip(fa, label, fps, padding)
     row.update(
-        window_lo=sc.window_lo, window_hi=sc.window_hi, frames=meta.get("frames"), fps=fps,
+        window_lo=sc.window_lo, window_hi=sc.window_hi, frames=meta.get("frames"), video_fps=fps,
         first_alert=fa, first_alert_s=None if fa is None else round(fa / fps, 4),
         outcome=sc.outcome, fn_reason=sc.fn_reason,
         lead_time_ms=None if sc.lead_time_ms is None else round(sc.lead_time_ms, 3),
@@ -247,7 +281,8 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
                 seed: int = 0, workers: int | None = None, scheduler: Any = None, backend: str = "taichi",
                 arch: str = "cpu", progress: bool = True, figures: bool = True,
                 rain_params: dict | None = None,
-                on_record: Callable[[dict], None] | None = None) -> DatasetRun:
+                on_record: Callable[[dict], None] | None = None, params: dict | None = None,
+                fps: float | None = None, color_order: str = "bgr", skip_missing: bool = False) -> DatasetRun:
     """Run ``models`` on every labelled clip of ``folder`` and write the reports.
 
     Parameters
@@ -280,6 +315,13 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
         Keyword arguments of ``cdnf_ti.stimuli.rain.RainParams``.
     on_record : callable, optional
         Called in this process with each record as it arrives (for tests / logging).
+    params : dict, optional
+        ``{model: parameter object or None}`` (``--param``).
+    fps, color_order : optional
+        How clips are read (``--fps``, ``--color-order``).
+    skip_missing : bool
+        Run the clips whose video exists and leave out label rows that name a missing video
+        (:func:`~cdnf_ti.experiments.labels.drop_missing`); by default a missing video is an error.
 
     Raises
     ------
@@ -295,6 +337,8 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
     folder = Path(folder)
     labels_path = Path(labels_path) if labels_path is not None else folder / "labels.csv"
     labels = read_labels(labels_path)
+    if skip_missing:
+        labels, _ = drop_missing(labels, folder)
     files = validate_dataset(labels, folder, labels_path)
     conditions = list(RAIN_CHOICES[rain])
     models = list(dict.fromkeys(models))
@@ -306,7 +350,8 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
         remove_stale_temps(out)  # left by a run killed mid-write
         try:
             return _run_locked(folder, labels_path, labels, files, out, models, conditions, padding, seed,
-                               workers, scheduler, backend, arch, progress, figures, rain_params, on_record)
+                               workers, scheduler, backend, arch, progress, figures, rain_params, on_record,
+                               dict(params=params, fps=fps, color_order=color_order))
         except KeyboardInterrupt:
             parallel.stop_all_pools()
             remove_stale_temps(out)  # the workers stopped mid-write leave no half-written files
@@ -314,7 +359,7 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
 
 
 def _run_locked(folder, labels_path, labels, files, out, models, conditions, padding, seed, workers, scheduler,
-                backend, arch, progress, figures, rain_params, on_record) -> DatasetRun:
+                backend, arch, progress, figures, rain_params, on_record, read: dict | None = None) -> DatasetRun:
     metas: dict[tuple[str, str, str], dict] = {}
     tasks: list[ClipTask] = []
     skipped = 0
@@ -323,8 +368,9 @@ def _run_locked(folder, labels_path, labels, files, out, models, conditions, pad
         for cond in conditions:
             todo = []
             for m in models:
-                meta = load_meta(out, cond, lab.clip, m,
-                                 fingerprint(files[lab.clip], cond, m, seed, backend, rain_params, arch), stale)
+                task = ClipTask(lab.clip, str(files[lab.clip]), cond, (m,), str(out), seed, backend, arch,
+                                rain_params, **(read or {}))
+                meta = load_meta(out, cond, lab.clip, m, task.fingerprint(m), stale)
                 if meta is not None:
                     metas[(lab.clip, m, cond)] = meta
                     skipped += 1
@@ -332,7 +378,7 @@ def _run_locked(folder, labels_path, labels, files, out, models, conditions, pad
                     todo.append(m)
             if todo:
                 tasks.append(ClipTask(lab.clip, str(files[lab.clip]), cond, tuple(todo), str(out), seed,
-                                      backend, arch, rain_params))
+                                      backend, arch, rain_params, **(read or {})))
     report_stale(stale)
     ran = 0
     for i, res in parallel.map_tasks(run_clip_task, tasks, workers=workers, scheduler=scheduler, arch=arch,

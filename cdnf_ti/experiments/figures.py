@@ -337,7 +337,8 @@ def dataset_figures(run: "DatasetRun", traces: Mapping, specs: Mapping, progress
     """All figures of a dataset run into ``OUT/figures`` (per-clip figures reused when up to date)."""
     figdir = Path(run.out) / "figures"
     made: list[Path] = []
-    fps = {r["clip"]: float(r["fps"]) for r in run.rows if not r.get("error") and r.get("fps") not in ("", None)}
+    fps = {r["clip"]: float(r["video_fps"]) for r in run.rows
+           if not r.get("error") and r.get("video_fps") not in ("", None)}
     pad_tag = f"{run.padding.before}-{run.padding.after}"
     for lab in tqdm(run.labels, desc="figures", unit="clip", disable=None if progress else True):
         tr = {(m, c): traces[(lab.clip, m, c)] for m in run.models for c in run.conditions

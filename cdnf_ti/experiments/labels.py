@@ -190,6 +190,13 @@ def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
     return labels
 
 
+def drop_missing(labels: list[ClipLabel], folder: str | os.PathLike) -> tuple[list[ClipLabel], list[str]]:
+    """The labels whose clip has a video in ``folder``, and the names of those that have none
+    (``--skip-missing``: run the clips that exist)."""
+    kept = [lab for lab in labels if find_clip(folder, lab.clip) is not None]
+    return kept, [lab.clip for lab in labels if find_clip(folder, lab.clip) is None]
+
+
 def find_clip(folder: str | os.PathLike, clip: str) -> Path | None:
     """The file (or image folder) of ``clip`` in ``folder``, or ``None``.
 

@@ -19,7 +19,7 @@ RAIN_CHOICES = {"none": ("clean",), "only": ("rain",), "both": ("clean", "rain")
 #: Columns of results.csv, in order.
 RESULT_COLUMNS = (
     "clip", "model", "condition", "label", "window_start", "window_end", "window_lo", "window_hi",
-    "contact_frame", "frames", "fps", "first_alert", "first_alert_s", "outcome", "fn_reason",
+    "contact_frame", "frames", "video_fps", "first_alert", "first_alert_s", "outcome", "fn_reason",
     "lead_time_ms", "output_name", "max_output", "threshold", "snr_db", "unconverged_frames",
     "seconds", "error",
 )
@@ -37,7 +37,7 @@ def trace_path(out: str | os.PathLike, condition: str, clip: str, model: str, ex
 
 
 def fingerprint(path: str | os.PathLike, condition: str, model: str, seed: int, backend: str,
-                rain_params: dict | None, arch: str = "cpu") -> dict:
+                rain_params: dict | None, arch: str = "cpu", options: dict | None = None) -> dict:
     """What a saved result depends on: the input file (path, size, mtime), the model, the code that
     ran it (:func:`cdnf_ti.provenance.code_identity`: a digest of the package's source files, the
     kernel compiler and its version, the arch and the engine settings) and, for rain, the seed and
@@ -52,6 +52,8 @@ def fingerprint(path: str | os.PathLike, condition: str, model: str, seed: int, 
                           "model": model, "condition": condition, **code_identity(backend, arch)}
     if condition == "rain":
         fp.update(seed=seed, rain_params=rain_params or {})
+    if options:  # how the input is read and the model set up, where not the defaults (--fps, --param, ...)
+        fp.update(options=options)
     return json.loads(json.dumps(fp))  # the form it takes after a JSON round trip
 
 

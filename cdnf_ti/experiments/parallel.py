@@ -171,12 +171,15 @@ class _Reporter:
 
     def finished(self, i: int, res: Any) -> None:
         self.done += 1
-        failed = isinstance(res, TaskFailed)
+        # a task that returned error records (a clip that could not be read) failed too, so this count
+        # agrees with the error rows the command reports afterwards
+        failed = isinstance(res, TaskFailed) or (isinstance(res, list) and any(
+            isinstance(r, dict) and r.get("error") for r in res))
         self.failed += failed
         if not self.enabled:
             return
         line = f"[{self.done}/{self.n}] {self._text(i, res)}"
-        if failed and self.describe is None:
+        if isinstance(res, TaskFailed) and self.describe is None:
             line += f": error: {res}"
         if self.bar is not None:
             if failed:

@@ -59,7 +59,8 @@ def load_traces(run: "DatasetRun") -> dict:
 def threshold_sweep(run: "DatasetRun", traces: Mapping) -> tuple[list[dict], dict]:
     """Sweep rows and the spec of each model (see :mod:`cdnf_ti.experiments.sweep`)."""
     labels = {lab.clip: lab for lab in run.labels}
-    fps = {r["clip"]: float(r["fps"]) for r in run.rows if not r.get("error") and r.get("fps") not in ("", None)}
+    fps = {r["clip"]: float(r["video_fps"]) for r in run.rows
+           if not r.get("error") and r.get("video_fps") not in ("", None)}
     specs = {}
     for m in run.models:
         mt = [t for (c, mm, cond), t in traces.items() if mm == m]

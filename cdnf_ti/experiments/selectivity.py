@@ -47,7 +47,7 @@ import numpy as np
 
 from ..atomic import atomic_write_json, atomic_write_text
 from ..errors import UserError
-from ..models import create_model
+from ..models import create_model, get_model_class
 from ..models.base import NotConvergedWarning
 from ..paper import TABLE1
 from ..provenance import code_identity, describe_differences, differences
@@ -241,11 +241,15 @@ class GridTask:
     out: str
     backend: str = "taichi"
     arch: str = "cpu"
+    model_params: tuple = ()  # (name, value) pairs that differ from the model's defaults (--param)
 
     @property
     def spec(self) -> dict:
-        return {"model": self.model, "stimulus": self.point.stimulus, "params": dict(self.point.spec),
+        spec = {"model": self.model, "stimulus": self.point.stimulus, "params": dict(self.point.spec),
                 "seed": self.seed, "backend": self.backend}
+        if self.model_params:  # absent with the defaults, so earlier results keep their keys
+            spec["model_params"] = dict(self.model_params)
+        return spec
 
     @property
     def key(self) -> str:
@@ -266,13 +270,22 @@ class GridTask:
         return Path(self.out) / "traces" / f"{self.key}.csv"
 
 
+def changed_params(params: Any) -> tuple:
+    """``(name, value)`` pairs of a parameter object that differ from its defaults (``()`` for None)."""
+    if params is None or not hasattr(params, "to_dict"):
+        return ()
+    default = type(params)().to_dict()
+    return tuple((k, v) for k, v in params.to_dict().items() if default.get(k) != v)
+
+
 def run_grid_task(task: GridTask) -> dict:
     """Run one model on one grid stimulus; write its trace and result file; return the result."""
     if task.backend == "taichi":
         init_worker(task.arch)
     stim = make_grid_stimulus(task.point, task.seed)
     fps = float(stim.fps)
-    model = create_model(task.model, backend=task.backend, arch=task.arch, fps=fps)
+    params = get_model_class(task.model).params_type(**dict(task.model_params)) if task.model_params else None
+    model = create_model(task.model, params, backend=task.backend, arch=task.arch, fps=fps)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NotConvergedWarning)  # recorded per frame in "converged"
         tr = model.run(stim.frames(), progress=False)
@@ -347,8 +360,12 @@ def _load_done(task: GridTask, stale: list[str] | None = None) -> dict | None:
 def selectivity_sweep(models: Sequence[str], out: str | Path, which: str = "quick",
                       coherences: Sequence[float] | None = None, seed: int = 0, workers: int | None = None,
                       scheduler: Any = None, backend: str = "taichi", arch: str = "cpu", progress: bool = True,
-                      figures: bool = True, classes: Sequence[str] | None = None) -> dict:
+                      figures: bool = True, classes: Sequence[str] | None = None,
+                      params: dict | None = None) -> dict:
     """Run the grid for every model (in parallel, resuming finished tasks); write the report.
+
+    ``params``: ``{model: parameter object or None}`` (``--param``); a changed parameter is part
+    of each task's key, so results of other parameters are not reused.
 
     Writes ``selectivity.csv`` (a row per model x grid point), ``selectivity.json``,
     ``selectivity.md`` (agreement table and a failure table per stimulus class
@@ -366,7 +383,8 @@ def selectivity_sweep(models: Sequence[str], out: str | Path, which: str = "quic
         if bad:
             raise UserError(f"unknown stimulus class {bad[0]!r}; choose from {', '.join(CLASSES)}")
         pts = [p for p in pts if p.cls in classes]
-    tasks = [GridTask(m, p, seed, str(out), backend, arch) for p in pts for m in models]
+    tasks = [GridTask(m, p, seed, str(out), backend, arch, changed_params((params or {}).get(m)))
+             for p in pts for m in models]
     stale: list[str] = []
     results: list[dict | None] = [_load_done(t, stale) for t in tasks]
     report_stale(stale)
