@@ -20,6 +20,9 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from ._version import __version__
+from .taichi_runtime import LANES_ENV, default_compiler  # the compiler layer's names; it imports no compiler
+
 #: Packages whose source files make up cdnf_ti (``kernels/``, ``stimuli/`` and ``bench/`` are
 #: installed under ``cdnf_ti``; listed so that an editable install, where they live beside it, counts them).
 _PACKAGES = ("cdnf_ti", "cdnf_ti.models", "cdnf_ti.kernels", "cdnf_ti.stimuli", "cdnf_ti.experiments")
@@ -79,16 +82,12 @@ def compiler_identity() -> dict[str, str]:
     Reads ``$CDNF_TI_COMPILER`` (set by ``--compiler`` and inherited by workers), else the
     fastest installed compiler, as :func:`cdnf_ti.taichi_runtime.default_compiler` does.
     """
-    from .taichi_runtime import default_compiler  # imports no compiler
-
     name = default_compiler()
     return {"compiler": name, "compiler_version": _version_of(name)}
 
 
 def engine_settings() -> dict[str, Any]:
     """Engine settings that can change a result: the lanes per vector (``$CDNF_TI_LANES``)."""
-    from .taichi_runtime import LANES_ENV
-
     return {"lanes": os.environ.get(LANES_ENV, "").strip() or "default"}
 
 
@@ -108,8 +107,6 @@ def code_identity(backend: str = "taichi", arch: str = "cpu") -> dict[str, Any]:
         ``source_digest`` and the cdnf_ti version; for the Taichi backend also ``compiler``,
         ``compiler_version``, ``arch`` and :func:`engine_settings`.
     """
-    from ._version import __version__
-
     ident: dict[str, Any] = {"version": __version__, "source_digest": source_digest(), "backend": backend}
     if backend == "taichi":
         ident.update(compiler_identity(), arch=arch, **engine_settings())

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import zlib
 from pathlib import Path
 from typing import Any
@@ -91,8 +92,6 @@ def report_stale(stale: list[str], stream: Any = None) -> None:
     """
     if not stale:
         return
-    import sys
-
     stream = sys.stderr if stream is None else stream
     shown = "; ".join(stale[:3]) + (f"; and {len(stale) - 3} more" if len(stale) > 3 else "")
     print(f"note: {len(stale)} finished result(s) in the output folder were made by other code or options "
