@@ -216,3 +216,59 @@ def test_imports_are_at_module_level_except_the_lazy_ones():
                 if not all(n.split(".")[0] in LAZY_OK or n.startswith("cdnf_ti.kernels") for n in names):
                     late.append(f"{rel}:{node.lineno}: {ast.unparse(node)}")
     assert not late, "imports inside functions (move them to module level):\n" + "\n".join(late)
+
+
+EXPERIMENTS = ROOT / "cdnf_ti" / "experiments"
+
+#: The experiment engines: they run tasks and return records; the reporters run after them.
+ENGINES = ("tasks", "parallel", "layout", "clip_tasks", "stimulus_tasks")
+#: The reporters: they write tables, figures and pages from what an engine returned.
+REPORTERS = ("reports", "sweep_reports", "figures", "report_page", "htmlreport", "tables")
+
+
+def experiments_graph() -> dict[str, set[str]]:
+    """Module -> the modules of ``cdnf_ti/experiments`` it imports, counting ``if TYPE_CHECKING:``
+    imports and imports inside functions too (read with :mod:`ast`; names relative to the folder)."""
+    names = {p.stem for p in EXPERIMENTS.glob("*.py")}
+    graph: dict[str, set[str]] = {}
+    for path in sorted(EXPERIMENTS.glob("*.py")):
+        edges = set()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.level == 1:
+                if node.module:
+                    edges.add(node.module.split(".")[0])
+                else:
+                    edges.update(a.name for a in node.names)
+            elif isinstance(node, ast.ImportFrom) and node.module and \
+                    node.module.startswith("cdnf_ti.experiments."):
+                edges.add(node.module.split(".")[2])
+            elif isinstance(node, ast.Import):
+                edges.update(a.name.split(".")[2] for a in node.names if a.name.startswith("cdnf_ti.experiments."))
+        graph[path.stem] = (edges & names) - {path.stem, "__init__"}
+    return graph
+
+
+def test_experiments_graph_counts_type_checking_imports():
+    graph = experiments_graph()
+    assert "clip_tasks" in graph["reports"]  # only under TYPE_CHECKING
+    assert "tasks" in graph["layout"]
+
+
+def test_no_import_cycle_in_experiments_even_through_type_checking_imports():
+    cycle = find_cycle(experiments_graph())
+    assert cycle is None, "import cycle in cdnf_ti/experiments: " + " -> ".join(cycle)
+
+
+def _reachable(graph: dict[str, set[str]], start: str) -> set[str]:
+    seen, todo = set(), [start]
+    while todo:
+        for w in graph.get(todo.pop(), ()):
+            if w not in seen:
+                seen.add(w)
+                todo.append(w)
+    return seen
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_no_engine_imports_a_reporter(engine):
+    assert not _reachable(experiments_graph(), engine) & set(REPORTERS)

@@ -1,120 +1,71 @@
 """Built-in experiments: the paper's Table I, the coherence sweep (Fig. 4) and Table II.
 
-Each stimulus x model (x coherence) run is an independent task, run on local
-processes or a Dask cluster like the dataset clips (:mod:`.parallel`).
+Each stimulus x model (x coherence) run is one cache entry of :mod:`.tasks`,
+resumed and run on local processes or a Dask cluster like the dataset clips.
+Table I has one runner (:func:`table1_results`) and one default size, the
+paper's 600 x 600 px (:data:`TABLE1_SIZE`), shared by ``demo`` and
+``experiment table1``.
 """
 from __future__ import annotations
 
-import warnings
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 
 from ..atomic import atomic_write_json, atomic_write_text
-from ..demo import format_table1
-from ..models import create_model
-from ..models.base import NotConvergedWarning, Trace
+from ..models.base import Trace
 from ..paper import TABLE1
-from ..stimuli.basic import BASIC_STIMULI, PAPER_LABELS, basic_stimulus
-from ..stimuli.incoherent import incoherent_stimulus
+from ..stimuli.basic import BASIC_STIMULI, PAPER_LABELS
 from .figures import plot_coherence, plot_selectivity
-from .parallel import TaskFailed, init_worker, map_tasks
+from .stimulus_tasks import (
+    TABLE1_SIZE as TABLE1_SIZE,  # re-exported: builtin.py was their home
+    StimulusTask as StimulusTask,
+    frames_of,
+    make_stimulus as make_stimulus,
+    run_stimulus_task as run_stimulus_task,
+    run_stimulus_tasks,
+    table1_results as table1_results,
+)
+
+__all__ = ["COHERENCES", "COHERENCE_SIZE", "TABLE1_SIZE", "StimulusTask", "coherence_markdown", "coherence_sweep",
+           "default_real_folder", "format_table1", "make_stimulus", "run_stimulus_task", "table1", "table1_results"]
 
 #: Coherence degrees of the sweep (paper Fig. 4 goes from 100% down to 5%).
 COHERENCES = (1.0, 0.95, 0.9, 0.8, 0.75, 0.6, 0.5, 0.4, 0.2, 0.05)
 
-
-@dataclass(frozen=True)
-class StimulusTask:
-    """One model on one generated stimulus.
-
-    Attributes
-    ----------
-    model : str
-    stimulus : str
-        Basic stimulus name.
-    size : int
-        Frame side (px).
-    coherence : float or None
-        None: the coherent basic stimulus; else the incoherent stimulus.
-    seed : int
-    out : str
-        Folder for the trace CSV (``traces/<stimulus>[_c<coh>].<model>.csv``).
-    backend, arch : str
-    scatter : {"flicker", "static"}
-        Incoherent construction (:class:`cdnf_ti.stimuli.incoherent.IncoherentStimulus`).
-    """
-
-    model: str
-    stimulus: str
-    size: int
-    coherence: float | None
-    seed: int
-    out: str
-    backend: str = "taichi"
-    arch: str = "cpu"
-    scatter: str = "flicker"
-    params: Any = None  # the model's parameter object (--param); None: its defaults
-
-    @property
-    def trace_file(self) -> Path:
-        tag = self.stimulus if self.coherence is None else f"{self.stimulus}_c{round(self.coherence * 100):03d}"
-        if self.coherence is not None and self.scatter != "flicker":
-            tag += f"_{self.scatter}"
-        return Path(self.out) / "traces" / f"{tag}.{self.model}.csv"
-
-
-def make_stimulus(name: str, size: int, coherence: float | None = None, seed: int = 0, scatter: str = "flicker"):
-    """A basic (coherence None) or incoherent stimulus, scaled to ``size`` x ``size`` px."""
-    kw = dict(height=size, width=size)  # start half-size: default_start_half_size(size)
-    if coherence is None:
-        return basic_stimulus(name, **kw)
-    return incoherent_stimulus(name, coherence, seed=seed, scatter=scatter, **kw)
-
-
-def _frames_of(stim):
-    return stim.frames() if hasattr(stim, "frames") else iter(stim)
-
-
-def run_stimulus_task(task: StimulusTask) -> dict:
-    """Run one model on one stimulus; save the trace; return a summary record."""
-    if task.backend == "taichi":
-        init_worker(task.arch)
-    stim = make_stimulus(task.stimulus, task.size, task.coherence, task.seed, task.scatter)
-    fps = float(getattr(stim, "fps", 30.0))
-    model = create_model(task.model, task.params, backend=task.backend, arch=task.arch, fps=fps)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", NotConvergedWarning)  # recorded per frame in "converged"
-        tr = model.run(_frames_of(stim), progress=False)
-    tr.to_csv(task.trace_file)
-    return {"model": task.model, "stimulus": task.stimulus, "coherence": task.coherence,
-            "alert": int(tr.first_alert is not None), "first_alert": tr.first_alert,
-            "max_output": float(tr.output.max()), "frames": tr.n_frames, "fps": fps,
-            "threshold": tr.threshold, "converged": bool(tr.converged.all()), "seconds": round(tr.seconds, 3)}
+#: Frame side (px) of the coherence sweep by default: 60 runs per model, so smaller than Table I's.
+COHERENCE_SIZE = 160
 
 
 def _snapshots(name: str, size: int, coherence: float | None, seed: int, k: Sequence[float],
                scatter: str = "flicker") -> list[np.ndarray]:
-    frames = [np.asarray(f, dtype=np.float32) for f in _frames_of(make_stimulus(name, size, coherence, seed, scatter))]
+    frames = [np.asarray(f, dtype=np.float32) for f in frames_of(make_stimulus(name, size, coherence, seed, scatter))]
     n = len(frames)
     return [frames[min(n - 1, int(round(q * (n - 1))))] for q in k]
 
 
-def _run(tasks: list[StimulusTask], workers, scheduler, arch, progress, label) -> list[dict]:
-    out: list[dict | None] = [None] * len(tasks)
-    for i, res in map_tasks(run_stimulus_task, tasks, workers=workers, scheduler=scheduler, arch=arch,
-                            progress=label if progress else False):
-        if isinstance(res, TaskFailed):
-            t = tasks[i]
-            res = {"model": t.model, "stimulus": t.stimulus, "coherence": t.coherence, "alert": None,
-                   "error": str(res)}
-        out[i] = res
-    return [r for r in out if r is not None]
+def format_table1(result: dict[str, dict[str, dict]]) -> str:
+    """Markdown table: each model's alert (paper's value in brackets)."""
+    models = list(result)
+    head = "| Stimulus | " + " | ".join(f"{m} (paper)" for m in models) + " |"
+    sep = "|---|" + "---|" * len(models)
+    lines = [head, sep]
+    for stim in BASIC_STIMULI:
+        cells = []
+        for m in models:
+            got = (result[m].get(stim) or {}).get("alert")
+            if got is None:  # the run failed (its error is reported separately)
+                cells.append("error")
+                continue
+            paper = TABLE1.get(m, {}).get(stim)
+            mark = "" if paper is None else (f" ({paper})" if paper == got else f" ({paper}) differs")
+            cells.append(f"{got}{mark}")
+        lines.append(f"| {PAPER_LABELS[stim]} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
 
 
-def table1(models: Sequence[str], out: str | Path, size: int = 160, seed: int = 0, workers: int | None = None,
+def table1(models: Sequence[str], out: str | Path, size: int = TABLE1_SIZE, seed: int = 0, workers: int | None = None,
            scheduler: Any = None, backend: str = "taichi", arch: str = "cpu", progress: bool = True,
            figures: bool = True, params: dict | None = None) -> dict:
     """Paper Table I: each model on the six basic stimuli; writes table1.md/json and Fig. 2 panel.
@@ -125,12 +76,9 @@ def table1(models: Sequence[str], out: str | Path, size: int = 160, seed: int = 
         ``result[model][stimulus] = {"alert", "first_alert", "max_output", ...}``.
     """
     out = Path(out)
+    res = table1_results(models, size, out, seed, workers, scheduler, backend, arch, progress, params)
     tasks = [StimulusTask(m, s, size, None, seed, str(out), backend, arch, params=(params or {}).get(m))
              for m in models for s in BASIC_STIMULI]
-    recs = _run(tasks, workers, scheduler, arch, progress, "table1")
-    res: dict[str, dict[str, dict]] = {m: {} for m in models}
-    for r in recs:
-        res[r["model"]][r["stimulus"]] = r
     atomic_write_json(out / "table1.json", {"size": size, "result": res, "paper": {m: TABLE1.get(m) for m in models}})
     md = (f"# Basic selectivity (paper Table I), {size}x{size} px stimuli at 30 fps\n\n"
           "1 = the model alerts; the paper's value in brackets.\n\n" + format_table1(res) + "\n")
@@ -144,7 +92,7 @@ def table1(models: Sequence[str], out: str | Path, size: int = 160, seed: int = 
     return res
 
 
-def coherence_sweep(models: Sequence[str], out: str | Path, size: int = 160,
+def coherence_sweep(models: Sequence[str], out: str | Path, size: int = COHERENCE_SIZE,
                     coherences: Sequence[float] = COHERENCES, seed: int = 0, workers: int | None = None,
                     scheduler: Any = None, backend: str = "taichi", arch: str = "cpu", progress: bool = True,
                     figures: bool = True, stimuli: Sequence[str] | None = None, scatter: str = "flicker",
@@ -168,7 +116,7 @@ def coherence_sweep(models: Sequence[str], out: str | Path, size: int = 160,
     tasks = [StimulusTask(m, s, size, float(c), seed, str(out), backend, arch, scatter,
                           params=(params or {}).get(m))
              for s in stimuli for c in coherences for m in models]
-    recs = _run(tasks, workers, scheduler, arch, progress, "coherence")
+    recs = run_stimulus_tasks(tasks, workers, scheduler, arch, progress, "coherence")
     table: dict[str, dict[str, dict[float, dict]]] = {s: {m: {} for m in models} for s in stimuli}
     for r in recs:
         table[r["stimulus"]][r["model"]][r["coherence"]] = r

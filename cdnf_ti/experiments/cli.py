@@ -35,7 +35,6 @@ from ..cli_common import (
     rain_seed_of,
     stimulus_seed_of,
 )
-from ..demo import format_table1
 from ..errors import InputError, UserError
 from ..limits import check_frame_size
 from ..render import render_dataset
@@ -244,11 +243,10 @@ def experiment_main(argv: Sequence[str]) -> int:
         add_output_option(p, default=f"cdnf_experiments/{name}")
         add_model_options(p, default_models="all")
         add_param_options(p)
-        p.add_argument("--size", type=int, default=160,
-                       help="frame side in px (default: %(default)s, so that the whole experiment runs in "
-                            "minutes; the paper and `demo` use 600 and the stimuli scale with the size, "
-                            "but a model's alert can differ near its threshold; use --size 600 to "
-                            "reproduce the paper exactly)")
+        p.add_argument("--size", type=int, default=builtin.TABLE1_SIZE if name == "table1" else builtin.COHERENCE_SIZE,
+                       help="frame side in px (default: %(default)s" + (", the paper's, as `demo`)" if name == "table1"
+                            else ", so that the 60 runs per model take minutes; the stimuli scale with the "
+                                 "size, but an alert near a threshold can differ from 600 px)"))
         _add_parallel(p, stimulus=True)
     p2.add_argument("--coherences", default=",".join(f"{c:g}" for c in builtin.COHERENCES),
                     help="comma-separated coherence degrees in (0, 1] (default: %(default)s)")
@@ -322,7 +320,7 @@ def _stimulus_experiment(args, models, builtin) -> int:
               figures=not args.no_figures)
     if args.which == "table1":
         res = builtin.table1(models, args.out, **kw)
-        print(format_table1(res))
+        print(builtin.format_table1(res))
         errs = [r for d in res.values() for r in d.values() if r.get("error")]
         for r in errs:
             print(f"error: {r['stimulus']} [{r['model']}]: {r['error']}", file=sys.stderr)

@@ -25,7 +25,7 @@ from .layout import trace_path
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..models.base import Trace
-    from .dataset import DatasetRun
+    from .clip_tasks import DatasetRun
     from .labels import ClipLabel
     from .scoring import Padding
 

@@ -1,18 +1,18 @@
 """The output layout of a dataset run: results.csv columns, trace paths, finished records and their fingerprints.
 
-A leaf of :mod:`cdnf_ti.experiments`: the engine (:mod:`.dataset`), the reports,
-the figures and the parameter sweep read and write a run's folder through it.
+The clip engine (:mod:`.clip_tasks`), the reports, the figures and the parameter
+sweep read and write a run's folder through it; its finished records are the
+cache entries of :mod:`.tasks`.
 """
 from __future__ import annotations
 
 import json
 import os
-import sys
 import zlib
 from pathlib import Path
 from typing import Any
 
-from ..provenance import code_identity, describe_differences, differences
+from .tasks import Entry, load_finished, report_stale as report_stale, task_fingerprint
 
 CONDITIONS = ("clean", "rain")
 RAIN_CHOICES = {"none": ("clean",), "only": ("rain",), "both": ("clean", "rain")}
@@ -50,12 +50,19 @@ def fingerprint(path: str | os.PathLike, condition: str, model: str, seed: int, 
     """
     st = os.stat(path)
     fp: dict[str, Any] = {"source": str(path), "source_size": st.st_size, "source_mtime_ns": st.st_mtime_ns,
-                          "model": model, "condition": condition, **code_identity(backend, arch)}
+                          "model": model, "condition": condition}
     if condition == "rain":
         fp.update(seed=seed, rain_params=rain_params or {})
     if options:  # how the input is read and the model set up, where not the defaults (--fps, --param, ...)
         fp.update(options=options)
-    return json.loads(json.dumps(fp))  # the form it takes after a JSON round trip
+    return task_fingerprint(backend, arch, fp)
+
+
+def trace_entry(out: str | os.PathLike, condition: str, clip: str, model: str, fp: dict) -> Entry:
+    """The cache entry (:class:`.tasks.Entry`) of the trace of (clip, model, condition) under ``out``:
+    its record ``<clip>.<model>.json`` beside the trace CSV, with fingerprint ``fp``."""
+    return Entry.make(f"{clip}.{model} [{condition}]", trace_path(out, condition, clip, model, "json"), fp,
+                      [trace_path(out, condition, clip, model)])
 
 
 def load_meta(out: str | os.PathLike, condition: str, clip: str, model: str,
@@ -67,32 +74,14 @@ def load_meta(out: str | os.PathLike, condition: str, clip: str, model: str,
     and what differs (``"c01.cdnf [clean]: source code"``) is appended to it, so the caller
     can say what it recomputes.
     """
+    if expected is not None:
+        meta = load_finished(trace_entry(out, condition, clip, model, expected), stale)
+        return meta if meta is not None and meta.get("model") == model else None
     jp = trace_path(out, condition, clip, model, "json")
-    cp = trace_path(out, condition, clip, model, "csv")
-    if not (jp.is_file() and cp.is_file()):
+    if not (jp.is_file() and trace_path(out, condition, clip, model).is_file()):
         return None
     try:
         meta = json.loads(jp.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
-    if not isinstance(meta, dict) or meta.get("model") != model:
-        return None
-    if expected is not None and meta.get("fingerprint") != expected:
-        if stale is not None:
-            what = describe_differences(differences(meta.get("fingerprint"), expected))
-            stale.append(f"{clip}.{model} [{condition}]: {what or 'fingerprint'}")
-        return None
-    return meta
-
-
-def report_stale(stale: list[str], stream: Any = None) -> None:
-    """Say, on stderr, that finished results made by other code or options are recomputed.
-
-    One line with the count and the first few results and what differs; nothing when none.
-    """
-    if not stale:
-        return
-    stream = sys.stderr if stream is None else stream
-    shown = "; ".join(stale[:3]) + (f"; and {len(stale) - 3} more" if len(stale) > 3 else "")
-    print(f"note: {len(stale)} finished result(s) in the output folder were made by other code or options "
-          f"and are recomputed ({shown})", file=stream)
+    return meta if isinstance(meta, dict) and meta.get("model") == model else None

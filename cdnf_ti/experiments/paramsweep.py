@@ -7,11 +7,12 @@
   ``V1,V2,...`` or one value. ``NAME`` is a field of the model's parameter
   dataclass (``CDNFParams``, ``LGMD2Params``, ...). The whole grid is checked
   (names, ranges, every combination built and validated) before any work.
-* One task per clip x setting (x condition), on local processes or a Dask
-  cluster (:func:`cdnf_ti.experiments.parallel.map_tasks`), each saving its trace
+* One task per clip x setting (x condition), run by the clip engine of
+  ``dataset`` (:mod:`.clip_tasks`, through :func:`.tasks.run_cached`) in this
+  process, on local processes or on a Dask cluster, each saving its trace
   atomically under ``OUT/settings/<setting>/traces/<condition>/``; a rerun reuses
-  every finished task whose fingerprint (input, model, backend, setting, rain
-  seed) matches.
+  every finished task whose fingerprint (input, model, setting, downscale, rain
+  seed, and the code, compiler and arch) matches, and says what it recomputes.
 * Per setting and condition: accuracy at the setting's own alert rule, the
   clip-level ROC AUC over the alert level, leave-one-out (or k-fold)
   cross-validated accuracy with the alert level chosen on the other folds, and
@@ -27,34 +28,45 @@ Output: ``OUT/param_sweep.csv``, ``OUT/param_sweep.json``, ``OUT/param_sweep.md`
 from __future__ import annotations
 
 import dataclasses
-import inspect
 import itertools
 import json
 import os
-import time
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
-import cv2
 import numpy as np
 
 from ..atomic import atomic_write_json
 from ..errors import InputError, UserError
-from ..frames import iter_grey, open_source
-from ..models import create_model, get_model_class
-from ..models.base import NotConvergedWarning, Trace
+from ..models import get_model_class
+from ..models.base import Trace
 from ..param_options import convert_value, field_kind
-from ..stimuli.rain import RainyFrames
+from .clip_tasks import (
+    ParamSweepRun as ParamSweepRun,  # re-exported: paramsweep.py was their home
+    SweepTask as SweepTask,
+    describe_sweep_task as describe_task,
+    run_sweep,
+    run_sweep_task as run_sweep_task,
+    setting_folder as setting_folder,
+    task_fingerprint as task_fingerprint,
+)
 from .clipscores import choose_level, correctness_matrix, cross_validated_accuracy, roc
 from .labels import read_labels, validate_dataset
-from .layout import RAIN_CHOICES, fingerprint, load_meta, rain_seed, report_stale, trace_path
+from .layout import RAIN_CHOICES, trace_path
 from .nested import sweep_nested_cv
-from .parallel import TaskFailed, map_tasks
 from .scoring import Padding, score_clip
-from .sweep import sweep_first_alerts, sweep_spec
+from .sweep import (
+    alert_levels as alert_levels,
+    setting_default_level as setting_default_level,
+    sweep_first_alerts,
+    sweep_spec,
+)
 from .sweep_reports import write_param_sweep_reports
+
+__all__ = ["MAX_SETTINGS", "ParamAxis", "ParamSweepRun", "SweepTask", "alert_levels", "before_contact", "build_grid",
+           "describe_task", "evaluate", "parse_param", "run_param_sweep", "run_sweep_task", "setting_default_level",
+           "setting_folder", "setting_key", "task_fingerprint"]
 
 MAX_SETTINGS = 10_000
 
@@ -158,122 +170,6 @@ def build_grid(model: str, param_specs: Sequence[str]) -> tuple[type, list[Param
     return ptype, axes, settings
 
 
-@dataclass(frozen=True)
-class SweepTask:
-    """One clip x setting x condition.
-
-    Attributes
-    ----------
-    clip, path : str
-    model : str
-    setting : tuple of (name, value)
-    key : str
-        :func:`setting_key` of the setting.
-    condition : {"clean", "rain"}
-    out : str
-        The sweep's output folder (the task writes under ``OUT/settings/<key>``).
-    seed : int
-    backend, arch : str
-    downscale : float
-        Frames are resized by this factor (1 = native size).
-    """
-
-    clip: str
-    path: str
-    model: str
-    setting: tuple
-    key: str
-    condition: str
-    out: str
-    seed: int = 0
-    backend: str = "taichi"
-    arch: str = "cpu"
-    downscale: float = 1.0
-
-
-def describe_task(task: SweepTask, result: Any = None) -> str:
-    """Progress line of one task: ``c01 [cdnf h=0.1,alpha_off=0.7, clean]: 12.3 s``."""
-    line = f"{task.clip} [{task.model} {task.key}, {task.condition}]"
-    if isinstance(result, dict):
-        if result.get("error"):
-            return f"{line}: error: {result['error']}"
-        if result.get("seconds") is not None:
-            return f"{line}: {result['seconds']:.1f} s"
-    return line
-
-
-def setting_folder(out: str | os.PathLike, key: str) -> Path:
-    return Path(out) / "settings" / key
-
-
-def task_fingerprint(task: SweepTask) -> dict:
-    """The dataset fingerprint of the input plus the setting and the downscale factor."""
-    fp = fingerprint(task.path, task.condition, task.model, task.seed, task.backend, None, task.arch)
-    fp["params"] = {k: v for k, v in task.setting}
-    fp["downscale"] = task.downscale
-    return json.loads(json.dumps(fp))
-
-
-def _resized(frames, factor: float):
-    for f in frames:
-        h, w = f.shape[:2]
-        yield cv2.resize(f, (max(2, round(w * factor)), max(2, round(h * factor))), interpolation=cv2.INTER_AREA)
-
-
-def run_sweep_task(task: SweepTask) -> dict:
-    """Run one model setting on one clip; save its trace and record (atomically).
-
-    Returns
-    -------
-    dict
-        The record (``error`` empty on success).
-    """
-    base = dict(clip=task.clip, model=task.model, condition=task.condition, key=task.key)
-    sf = setting_folder(task.out, task.key)
-    try:
-        src = open_source(task.path)
-        cls = get_model_class(task.model)
-        params = cls.params_type(**dict(task.setting))
-        model = create_model(task.model, params, backend=task.backend, arch=task.arch, fps=src.fps)
-        frames = iter_grey(src)
-        if task.condition == "rain":
-            frames = iter(RainyFrames(frames, None, seed=rain_seed(task.seed, task.clip),
-                                      backend="numpy" if task.backend == "numpy" else "taichi"))
-        if task.downscale != 1.0:
-            frames = _resized(frames, task.downscale)
-        t0 = time.perf_counter()
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NotConvergedWarning)  # recorded per frame in "converged"
-            trace = model.run(frames)
-        wall = time.perf_counter() - t0
-    except (InputError, ValueError, RuntimeError, OSError) as e:
-        return dict(base, error=str(e).splitlines()[0] if str(e) else type(e).__name__)
-    meta = dict(base, frames=trace.n_frames, fps=float(src.fps), first_alert=trace.first_alert,
-                output_name=trace.output_name, threshold=trace.threshold, seconds=round(wall, 3),
-                setting={k: v for k, v in task.setting}, error="", fingerprint=task_fingerprint(task))
-    trace.to_csv(trace_path(sf, task.condition, task.clip, task.model))
-    atomic_write_json(trace_path(sf, task.condition, task.clip, task.model, "json"), meta)
-    assert load_meta(sf, task.condition, task.clip, task.model) is not None
-    return meta
-
-
-@dataclass
-class ParamSweepRun:
-    """What a parameter sweep produced."""
-
-    model: str
-    axes: list
-    settings: list
-    conditions: list
-    rows: list
-    records: dict
-    out: Path
-    ran: int = 0
-    skipped: int = 0
-    errors: list = dataclasses.field(default_factory=list)
-    nested: dict = dataclasses.field(default_factory=dict)
-
-
 def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | None, out: str | os.PathLike,
                     model: str, param_specs: Sequence[str], rain: str = "none", padding=None, seed: int = 0,
                     folds: int = 0, workers: int | None = None, scheduler: Any = None, backend: str = "taichi",
@@ -328,38 +224,14 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
                                           "settings": len(settings), "conditions": conditions,
                                           "downscale": downscale, "dataset": str(folder),
                                           "labels": str(labels_path)})
-    records: dict[tuple, dict] = {}
-    tasks: list[SweepTask] = []
-    skipped = 0
-    stale: list[str] = []
-    for s in settings:
-        key = setting_key(s)
-        for cond in conditions:
-            for lab in labels:
-                t = SweepTask(lab.clip, str(Path(files[lab.clip]).resolve()), name, tuple(s.items()), key, cond,
-                              str(out), seed, backend, arch, float(downscale))
-                meta = load_meta(setting_folder(out, key), cond, lab.clip, name, task_fingerprint(t), stale)
-                if meta is not None:
-                    records[(key, cond, lab.clip)] = meta
-                    skipped += 1
-                else:
-                    tasks.append(t)
-    report_stale(stale)
-    ran = 0
-    errors = []
-    extra = {}
-    if "describe" in inspect.signature(map_tasks).parameters:  # progress lines naming the setting
-        extra["describe"] = describe_task
-    for i, res in map_tasks(run_sweep_task, tasks, workers=workers, scheduler=scheduler, arch=arch,
-                            progress=f"sweep {name}" if progress else False, **extra):
-        t = tasks[i]
-        if isinstance(res, TaskFailed):
-            res = dict(clip=t.clip, model=name, condition=t.condition, key=t.key, error=f"{t.path}: {res}")
-        records[(t.key, t.condition, t.clip)] = res
-        if res.get("error"):
-            errors.append(res)
-        else:
-            ran += 1
+    tasks = [SweepTask(lab.clip, str(Path(files[lab.clip]).resolve()), name, tuple(s.items()), setting_key(s),
+                       cond, str(out), seed, backend, arch, float(downscale))
+             for s in settings for cond in conditions for lab in labels]
+    done = run_sweep(tasks, workers=workers, scheduler=scheduler, arch=arch,
+                     progress=f"sweep {name}" if progress else False)
+    records = {(t.key, t.condition, t.clip): r for t, r in zip(tasks, done.records)}
+    errors = [r for r in done.records if r.get("error")]
+    ran, skipped = done.ran, done.reused
     alerts: dict = {}
     rows = evaluate(out, name, settings, conditions, labels, padding, folds, seed, alerts=alerts)
     labs = {lab.clip: lab for lab in labels}
@@ -455,27 +327,3 @@ def before_contact(label):
         return label
     end = max(label.window_start, min(label.window_end, label.contact_frame - 1))
     return dataclasses.replace(label, window_end=end)
-
-
-def alert_levels(spec, traces, setting: dict | None = None) -> list[float]:
-    """Alert levels to score: the model's sweep values, plus for C-DNF log-spaced
-    epsilons up to the largest ``I_v - 0.5`` seen (so the ROC reaches "never alerts")."""
-    vals = set(float(v) for v in spec.values)
-    if spec.method == "cdnf-epsilon":
-        top = max((float(np.nanmax(t.output)) - 0.5 for t in traces if t.n_frames), default=0.0)
-        if top > 1e-6:
-            vals.update(float(v) for v in np.round(np.geomspace(1e-6, top * 1.05, 40), 9))
-        if setting and "epsilon" in setting:
-            vals.add(float(setting["epsilon"]))
-    return sorted(vals)
-
-
-def setting_default_level(spec, setting: dict) -> float | None:
-    """The alert level the setting itself uses (C-DNF/SDNF ``epsilon``, LGMD ``n_ts``)."""
-    if spec.method == "cdnf-epsilon":
-        return float(setting.get("epsilon", spec.default))
-    if spec.parameter.startswith("n_ts") and "n_ts" in setting:
-        return float(setting["n_ts"])
-    if spec.parameter.startswith("epsilon") and "epsilon" in setting:
-        return float(setting["epsilon"])
-    return spec.default

@@ -8,7 +8,7 @@ from .clipscores import IN_SAMPLE_NOTE
 from .htmlreport import Page, add_markdown
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .dataset import DatasetRun
+    from .clip_tasks import DatasetRun
 
 
 def write_dataset_html(run: "DatasetRun", summary: Mapping, markdown: str, pngs: Sequence[Path] = ()) -> Path:

@@ -25,10 +25,9 @@ from .clipscores import (
 from .figures import dataset_figures
 from .htmlreport import markdown_table
 from .layout import RESULT_COLUMNS, trace_path
-from .paramsweep import alert_levels
 from .report_page import write_dataset_html
 from .scoring import tally
-from .sweep import sweep_dataset, sweep_first_alerts, sweep_spec
+from .sweep import alert_levels, sweep_dataset, sweep_first_alerts, sweep_spec
 from .tables import (
     csv_text as csv_text,  # re-exported: their old home
     pct as pct,
@@ -36,7 +35,7 @@ from .tables import (
 )
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .dataset import DatasetRun
+    from .clip_tasks import DatasetRun
 
 CONDITION_LABELS = {"clean": "Normal", "rain": "With synthetic rain"}
 SWEEP_COLUMNS = ("model", "condition", "parameter", "value", "is_default", "TP", "TN", "FP", "FN", "FN_early",

@@ -27,18 +27,15 @@ half-size 45% of the side, 1/t expansion, black/white):
 
 Each model x stimulus is one task, saved as
 ``tasks/<key>.json`` (and its trace as ``traces/<key>.csv``); a rerun with the
-same output folder reuses every finished task whose specification is
-unchanged, so an interrupted sweep resumes. Tasks run in batches of one model
+same output folder reuses every finished task whose specification and code
+are unchanged (:mod:`.tasks`), so an interrupted sweep resumes. Tasks run in batches of one model
 at one frame size (:class:`GridBatch`) on local processes or Dask
 (:mod:`.parallel`), so each worker compiles a model's kernels once per shape.
 """
 from __future__ import annotations
 
 import csv
-import hashlib
 import io
-import json
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
@@ -47,16 +44,18 @@ import numpy as np
 
 from ..atomic import atomic_write_json, atomic_write_text
 from ..errors import UserError
-from ..models import create_model, get_model_class
-from ..models.base import NotConvergedWarning
 from ..paper import TABLE1
-from ..provenance import code_identity, describe_differences, differences
-from ..stimuli.basic import basic_stimulus
-from ..stimuli.grating import GratingStimulus
-from ..stimuli.incoherent import IncoherentStimulus
 from .figures import _plt, save_figure
-from .layout import report_stale
-from .parallel import TaskFailed, _one_line, init_worker, map_tasks
+from .stimulus_tasks import (
+    GridBatch as GridBatch,  # re-exported: selectivity.py was their home
+    GridTask as GridTask,
+    changed_params as changed_params,
+    make_batches as make_batches,
+    make_grid_stimulus as make_grid_stimulus,
+    run_grid_batch as run_grid_batch,
+    run_grid_task as run_grid_task,
+    run_grid_tasks,
+)
 
 BASE_SIZE = {"quick": 120, "full": 240}
 CLASSES = ("looming", "receding", "translating", "grating")
@@ -218,145 +217,6 @@ def grid(which: str = "quick", coherences: Sequence[float] | None = None) -> lis
     return pts
 
 
-def make_grid_stimulus(point: GridPoint, seed: int = 0):
-    """The stimulus of a grid point (a frame generator with ``fps`` and ``n_frames``)."""
-    kw = point.kwargs
-    coherence = kw.pop("coherence", None)
-    scatter = kw.pop("scatter", "flicker")
-    if point.cls == "grating":
-        return GratingStimulus(seed=seed, **kw)
-    base = basic_stimulus(point.stimulus, **kw)
-    if coherence is None:
-        return base
-    return IncoherentStimulus(base, coherence, seed, scatter=scatter)
-
-
-@dataclass(frozen=True)
-class GridTask:
-    """One model on one grid stimulus; results in ``<out>/tasks/<key>.json``."""
-
-    model: str
-    point: GridPoint
-    seed: int
-    out: str
-    backend: str = "taichi"
-    arch: str = "cpu"
-    model_params: tuple = ()  # (name, value) pairs that differ from the model's defaults (--param)
-
-    @property
-    def spec(self) -> dict:
-        spec = {"model": self.model, "stimulus": self.point.stimulus, "params": dict(self.point.spec),
-                "seed": self.seed, "backend": self.backend}
-        if self.model_params:  # absent with the defaults, so earlier results keep their keys
-            spec["model_params"] = dict(self.model_params)
-        return spec
-
-    @property
-    def key(self) -> str:
-        h = hashlib.sha1(json.dumps(self.spec, sort_keys=True, default=str).encode()).hexdigest()[:12]
-        return f"{self.point.stimulus}.{self.model}.{h}"
-
-    @property
-    def code(self) -> dict:
-        """The code that makes this task's result (:func:`cdnf_ti.provenance.code_identity`)."""
-        return code_identity(self.backend, self.arch)
-
-    @property
-    def result_file(self) -> Path:
-        return Path(self.out) / "tasks" / f"{self.key}.json"
-
-    @property
-    def trace_file(self) -> Path:
-        return Path(self.out) / "traces" / f"{self.key}.csv"
-
-
-def changed_params(params: Any) -> tuple:
-    """``(name, value)`` pairs of a parameter object that differ from its defaults (``()`` for None)."""
-    if params is None or not hasattr(params, "to_dict"):
-        return ()
-    default = type(params)().to_dict()
-    return tuple((k, v) for k, v in params.to_dict().items() if default.get(k) != v)
-
-
-def run_grid_task(task: GridTask) -> dict:
-    """Run one model on one grid stimulus; write its trace and result file; return the result."""
-    if task.backend == "taichi":
-        init_worker(task.arch)
-    stim = make_grid_stimulus(task.point, task.seed)
-    fps = float(stim.fps)
-    params = get_model_class(task.model).params_type(**dict(task.model_params)) if task.model_params else None
-    model = create_model(task.model, params, backend=task.backend, arch=task.arch, fps=fps)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", NotConvergedWarning)  # recorded per frame in "converged"
-        tr = model.run(stim.frames(), progress=False)
-    tr.to_csv(task.trace_file)
-    spikes = [int(i) for i, s in enumerate(tr.spike) if s]
-    rec = {"spec": task.spec, "code": task.code, "alert": int(tr.first_alert is not None),
-           "first_alert": tr.first_alert,
-           "alert_frames": len(spikes), "frames": tr.n_frames, "fps": fps,
-           "max_output": float(tr.output.max()), "argmax_output": int(tr.output.argmax()),
-           "threshold": tr.threshold, "seconds": round(tr.seconds, 3)}
-    atomic_write_json(task.result_file, rec)
-    return rec
-
-
-@dataclass(frozen=True)
-class GridBatch:
-    """Grid tasks of one model at one frame size, run one after another in one worker.
-
-    Taichi specialises the models' kernels to the frame shape, so a worker that
-    keeps one model at one shape compiles once per batch instead of once per
-    stimulus.
-    """
-
-    tasks: tuple
-
-
-def run_grid_batch(batch: GridBatch) -> list[dict]:
-    """Run every task of a batch (a failed task gives an error record, the rest go on)."""
-    out = []
-    for t in batch.tasks:
-        try:
-            out.append(run_grid_task(t))
-        except Exception as e:  # noqa: BLE001 - one failed stimulus must not stop the batch
-            out.append({"spec": t.spec, "alert": None, "error": _one_line(e)})
-    return out
-
-
-def make_batches(tasks: Sequence[GridTask], chunk: int = 16) -> list[GridBatch]:
-    """Group tasks by (model, frame shape), in chunks of at most ``chunk`` tasks."""
-    groups: dict[tuple, list[GridTask]] = {}
-    for t in tasks:
-        kw = t.point.kwargs
-        shape = (kw.get("height"), kw.get("width"))
-        groups.setdefault((t.model, shape), []).append(t)
-    out = []
-    for g in groups.values():
-        for i in range(0, len(g), chunk):
-            out.append(GridBatch(tuple(g[i : i + chunk])))
-    out.sort(key=lambda b: -len(b.tasks))
-    return out
-
-
-def _load_done(task: GridTask, stale: list[str] | None = None) -> dict | None:
-    """The finished result of ``task``, or None; one made by other code is not finished (and is named
-    in ``stale`` with what differs)."""
-    try:
-        rec = json.loads(task.result_file.read_text())
-    except (OSError, ValueError):
-        return None
-    same = json.dumps(rec.get("spec"), sort_keys=True, default=str) == json.dumps(task.spec, sort_keys=True,
-                                                                                   default=str)
-    if not (same and rec.get("alert") in (0, 1)):
-        return None
-    code = json.loads(json.dumps(task.code))
-    if rec.get("code") != code:
-        if stale is not None:
-            stale.append(f"{task.key}: {describe_differences(differences(rec.get('code'), code)) or 'code'}")
-        return None
-    return rec
-
-
 def selectivity_sweep(models: Sequence[str], out: str | Path, which: str = "quick",
                       coherences: Sequence[float] | None = None, seed: int = 0, workers: int | None = None,
                       scheduler: Any = None, backend: str = "taichi", arch: str = "cpu", progress: bool = True,
@@ -385,19 +245,9 @@ def selectivity_sweep(models: Sequence[str], out: str | Path, which: str = "quic
         pts = [p for p in pts if p.cls in classes]
     tasks = [GridTask(m, p, seed, str(out), backend, arch, changed_params((params or {}).get(m)))
              for p in pts for m in models]
-    stale: list[str] = []
-    results: list[dict | None] = [_load_done(t, stale) for t in tasks]
-    report_stale(stale)
-    todo = [i for i, r in enumerate(results) if r is None]
-    reused = len(tasks) - len(todo)
-    index = {tasks[i].key: i for i in todo}
-    batches = make_batches([tasks[i] for i in todo])
-    for j, res in map_tasks(run_grid_batch, batches, workers=workers, scheduler=scheduler, arch=arch,
-                            progress="selectivity (batches)" if progress else False):
-        if isinstance(res, TaskFailed):
-            res = [{"spec": t.spec, "alert": None, "error": str(res)} for t in batches[j].tasks]
-        for t, r in zip(batches[j].tasks, res):
-            results[index[t.key]] = r
+
+    done = run_grid_tasks(tasks, workers=workers, scheduler=scheduler, arch=arch, progress=progress)
+    results = done.records
     rows = []
     for t, r in zip(tasks, results):
         p = t.point
@@ -417,7 +267,7 @@ def selectivity_sweep(models: Sequence[str], out: str | Path, which: str = "quic
     atomic_write_text(out / "selectivity.md", selectivity_markdown(rows, which))
     if figures:
         plot_selectivity_grid(out / "figures" / "selectivity_grid.png", rows)
-    return {"rows": rows, "agreement": agreement, "ran": len(todo), "reused": reused}
+    return {"rows": rows, "agreement": agreement, "ran": done.ran + done.failed, "reused": done.reused}
 
 
 def _write_csv(path: Path, rows: list[dict]) -> None:

@@ -176,3 +176,27 @@ def sweep_dataset(specs: Mapping[str, SweepSpec], traces: Mapping[tuple[str, str
                     "hits": d["TP"], "false_alarms": d["FP"] + d["FN_early"], "method": spec.method,
                 })
     return rows
+
+
+def alert_levels(spec, traces, setting: dict | None = None) -> list[float]:
+    """Alert levels to score: the model's sweep values, plus for C-DNF log-spaced
+    epsilons up to the largest ``I_v - 0.5`` seen (so the ROC reaches "never alerts")."""
+    vals = set(float(v) for v in spec.values)
+    if spec.method == "cdnf-epsilon":
+        top = max((float(np.nanmax(t.output)) - 0.5 for t in traces if t.n_frames), default=0.0)
+        if top > 1e-6:
+            vals.update(float(v) for v in np.round(np.geomspace(1e-6, top * 1.05, 40), 9))
+        if setting and "epsilon" in setting:
+            vals.add(float(setting["epsilon"]))
+    return sorted(vals)
+
+
+def setting_default_level(spec, setting: dict) -> float | None:
+    """The alert level the setting itself uses (C-DNF/SDNF ``epsilon``, LGMD ``n_ts``)."""
+    if spec.method == "cdnf-epsilon":
+        return float(setting.get("epsilon", spec.default))
+    if spec.parameter.startswith("n_ts") and "n_ts" in setting:
+        return float(setting["n_ts"])
+    if spec.parameter.startswith("epsilon") and "epsilon" in setting:
+        return float(setting["epsilon"])
+    return spec.default

@@ -16,7 +16,7 @@ from .nested import NESTED_MEANING
 from .tables import csv_text, pct
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .paramsweep import ParamSweepRun
+    from .clip_tasks import ParamSweepRun
 
 SCORE_COLUMNS = ("condition", "clips", "errors", "accuracy", "auc", "cv_accuracy", "cv_scheme",
                  "best_in_sample_accuracy", "best_in_sample_level", "alert_parameter", "hits", "hits_before_contact",

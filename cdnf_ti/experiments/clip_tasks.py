@@ -1,0 +1,431 @@
+"""The clip engine: models on labelled clips, clean or with synthetic rain, for ``dataset`` and ``experiment sweep``.
+
+One unit of work (:class:`ClipTask`) decodes a clip once (and rains on it once)
+for several models; each (clip, model, condition) is one cache entry of
+:mod:`.tasks`, saved as ``<out>/traces/<condition>/<clip>.<model>.csv`` and its
+record ``.json`` beside it (:mod:`.layout`). A parameter sweep runs the same
+units with one model setting each (:class:`SweepTask`), under
+``OUT/settings/<setting>/``.
+
+The engine returns records; the experiments (:mod:`.dataset`, :mod:`.paramsweep`)
+score them and hand them to the reporters afterwards. This module imports no reporter.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import cv2
+
+from ..errors import InputError, UserError
+from ..frames import iter_grey, open_source
+from ..limits import check_frame_size
+from ..models import create_model, get_model_class
+from ..models.base import NotConvergedWarning, run_models
+from ..stimuli.rain import RainParams, RainyFrames
+from .labels import ClipLabel
+from .layout import fingerprint, rain_seed, trace_entry
+from .parallel import TaskFailed, init_worker
+from .scoring import Padding
+from .tasks import CachedRun, Entry, run_cached, save_finished
+
+
+@dataclass(frozen=True)
+class ClipTask:
+    """One clip under one condition, for several models (decoded once for all of them).
+
+    Attributes
+    ----------
+    clip : str
+    path : str
+        The clip's file.
+    condition : {"clean", "rain"}
+    models : tuple of str
+    out : str
+        The folder its traces go under (``out/traces/<condition>/``).
+    seed : int
+        Run seed (rain).
+    backend, arch : str
+        Model backend and Taichi arch.
+    rain_params : dict or None
+        Keyword arguments of ``RainParams``.
+    params : dict or None
+        ``{model: parameter object or None}`` (``--param``); absent models keep their defaults.
+    fps, color_order :
+        How the clip is read (:func:`~cdnf_ti.frames.open_source`; ``--fps``, ``--color-order``).
+    setting : tuple of (name, value)
+        Model parameters other than the defaults (a parameter sweep's setting).
+    downscale : float
+        Frames are resized by this factor (1 = native size).
+    key : str
+        The setting's name in a parameter sweep (:func:`cdnf_ti.experiments.paramsweep.setting_key`);
+        empty for a dataset run. A sweep's fingerprints hold the setting and the downscale factor.
+    """
+
+    clip: str
+    path: str
+    condition: str
+    models: tuple[str, ...]
+    out: str
+    seed: int = 0
+    backend: str = "taichi"
+    arch: str = "cpu"
+    rain_params: dict | None = None
+    params: dict | None = None
+    fps: float | None = None
+    color_order: str = "bgr"
+    setting: tuple = ()
+    downscale: float = 1.0
+    key: str = ""
+
+    def fingerprint(self, model: str) -> dict:
+        """The fingerprint of ``model``'s result (:func:`.layout.fingerprint`; a sweep adds
+        ``params`` and ``downscale``)."""
+        fp = fingerprint(self.path, self.condition, model, self.seed, self.backend, self.rain_params, self.arch,
+                         run_options(model, self.params, self.fps, self.color_order))
+        if self.key:
+            fp.update(params={k: v for k, v in self.setting}, downscale=self.downscale)
+        return fp
+
+    def entry(self, model: str) -> Entry:
+        """The cache entry of ``model``'s trace on this clip."""
+        e = trace_entry(self.out, self.condition, self.clip, model, self.fingerprint(model))
+        return dataclasses.replace(e, name=f"{self.clip}.{model} [{self.key}, {self.condition}]") if self.key else e
+
+
+def run_options(model: str, params: dict | None, fps: float | None, color_order: str) -> dict:
+    """What a trace depends on beside the input and code, where not the defaults: the model's
+    parameters (``--param``), the frame rate (``--fps``) and the colour order (``--color-order``)."""
+    opts: dict[str, Any] = {}
+    p = (params or {}).get(model)
+    if p is not None and hasattr(p, "to_dict"):
+        default = type(p)().to_dict()
+        changed = {k: v for k, v in p.to_dict().items() if default.get(k) != v}
+        if changed:
+            opts["params"] = changed
+    if fps is not None:
+        opts["fps"] = float(fps)
+    if color_order != "bgr":
+        opts["color_order"] = color_order
+    return opts
+
+
+def _resized(frames, factor: float):
+    for f in frames:
+        h, w = f.shape[:2]
+        yield cv2.resize(f, (max(2, round(w * factor)), max(2, round(h * factor))), interpolation=cv2.INTER_AREA)
+
+
+def _frames(task: ClipTask, src):
+    """The frame stream of a task (grey; rainy for the rain condition; resized) and the rain object."""
+    frames = iter_grey(src)
+    rain = None
+    if task.condition != "clean":
+        params = RainParams(**task.rain_params) if task.rain_params else None
+        rain = RainyFrames(frames, params, seed=rain_seed(task.seed, task.clip),
+                           backend="numpy" if task.backend == "numpy" else "taichi")
+        frames = iter(rain)
+    if task.downscale != 1.0:
+        frames = _resized(frames, task.downscale)
+    return frames, rain
+
+
+def run_clip_task(task: ClipTask) -> list[dict]:
+    """Run the task's models on its clip in one pass; save each trace and its record.
+
+    The clip is decoded (and, for the rain condition, rained on) once for all
+    the task's models (:func:`~cdnf_ti.models.base.run_models`). Models are
+    isolated: one model that fails gives an error record for that model only.
+
+    Returns
+    -------
+    list of dict
+        One record per model: ``clip, model, condition, frames, fps,
+        first_alert, max_output, output_name, threshold, snr_db,
+        unconverged_frames, seconds, error`` (``error`` empty on success; a
+        sweep's records add ``key`` and ``setting``). A clip that cannot be
+        opened or decoded gives records with ``error`` set for every model;
+        nothing is saved for them, so a rerun tries again.
+    """
+    if task.backend == "taichi":
+        init_worker(task.arch)
+    base = {"clip": task.clip, "condition": task.condition}
+    if task.key:
+        base["key"] = task.key
+
+    def failed(names, e: BaseException) -> list[dict]:
+        msg = str(e) if isinstance(e, InputError) else f"{task.path}: {type(e).__name__}: {e}"
+        return [dict(base, model=m, error=msg.splitlines()[0] if msg else type(e).__name__) for m in names]
+
+    try:
+        src = open_source(task.path, fps=task.fps, color_order=task.color_order)
+        try:
+            check_frame_size(*src.shape, n_models=len(task.models), what=str(task.path))
+        except UserError as e:  # frames smaller than the widest kernel: that clip's error rows
+            raise InputError(task.path, str(e).split(": ", 1)[-1]) from None
+    except InputError as e:
+        return failed(task.models, e)
+    records: dict[str, dict] = {}
+    names, instances = [], []
+    for name in task.models:
+        try:
+            params = (get_model_class(name).params_type(**dict(task.setting)) if task.setting
+                      else (task.params or {}).get(name))
+            instances.append(create_model(name, params, backend=task.backend, arch=task.arch, fps=src.fps))
+            names.append(name)
+        except Exception as e:  # noqa: BLE001 - one model's failure is that model's error row
+            records.update((r["model"], r) for r in failed([name], e))
+    if instances:
+        errors: list = []
+        rain = None
+        t0 = time.perf_counter()
+        try:
+            frames, rain = _frames(task, src)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", NotConvergedWarning)  # recorded as unconverged_frames
+                traces = run_models(instances, frames, progress=False, errors=errors)
+        except (InputError, OSError, RuntimeError, ValueError) as e:  # the clip (or its rain) is bad
+            traces, errors = [None] * len(names), [e] * len(names)
+        wall = time.perf_counter() - t0
+        snr = None
+        if rain is not None and errors.count(None):
+            s = getattr(rain, "snr_db", None)
+            snr = None if s is None or not math.isfinite(float(s)) else float(s)
+        for name, trace, err in zip(names, traces, errors):
+            if err is not None or trace is None:
+                records.update((r["model"], r) for r in failed([name], err or RuntimeError("no trace")))
+                continue
+            meta = dict(
+                base, model=name, frames=trace.n_frames, fps=float(src.fps), first_alert=trace.first_alert,
+                max_output=float(trace.output.max()) if trace.n_frames else None,
+                output_name=trace.output_name, threshold=trace.threshold, snr_db=snr,
+                unconverged_frames=int((~trace.converged).sum()),
+                seconds=round(float(trace.seconds if not task.key else wall), 3),
+                source=str(task.path), seed=task.seed if rain is not None else None,
+                rain_seed=rain_seed(task.seed, task.clip) if rain is not None else None, error="",
+            )
+            if task.key:
+                meta["setting"] = {k: v for k, v in task.setting}
+            entry = task.entry(name)
+            trace.to_csv(entry.outputs[0])
+            records[name] = save_finished(entry, meta)
+    return [records[m] for m in task.models]
+
+
+def describe_clip_task(task: ClipTask, records: Any) -> str:
+    """One progress line for a finished task: ``clip [models, condition]: seconds`` or its error."""
+    head = f"{task.clip} [{', '.join(task.models)}, {task.condition}]"
+    if records is None:
+        return head
+    if isinstance(records, TaskFailed):
+        return f"{head}: error: {records}"
+    errs = [r for r in records if r.get("error")]
+    secs = sum(float(r.get("seconds") or 0) for r in records if not r.get("error"))
+    line = f"{head}: {secs:.1f} s"
+    if errs:
+        line += "; " + "; ".join(f"error [{r['model']}]: {r['error']}" for r in errs)
+    return line
+
+
+def run_clips(clips: Sequence[tuple[str, str]], out: str | os.PathLike, models: Sequence[str],
+              conditions: Sequence[str], seed: int = 0, workers: int | None = None, scheduler: Any = None,
+              backend: str = "taichi", arch: str = "cpu", progress: bool = True, rain_params: dict | None = None,
+              on_record: Callable[[dict], None] | None = None, params: dict | None = None, fps: float | None = None,
+              color_order: str = "bgr") -> tuple[dict[tuple[str, str, str], dict], CachedRun]:
+    """Every clip x condition x model, reusing finished traces (the dataset engine).
+
+    Parameters
+    ----------
+    clips : sequence of (clip, path)
+        Clip names and their (absolute) files.
+    out : path-like
+        Output folder (traces under ``out/traces/``).
+    models, conditions : sequence of str
+    seed, workers, scheduler, backend, arch, progress, rain_params, params, fps, color_order
+        As :func:`cdnf_ti.experiments.dataset.run_dataset`.
+    on_record : callable, optional
+        Called in this process with each record computed now.
+
+    Returns
+    -------
+    (dict, CachedRun)
+        ``{(clip, model, condition): record}`` and what was reused and computed.
+    """
+    keys, tasks = [], []
+    for clip, path in clips:
+        for cond in conditions:
+            for m in models:
+                keys.append((clip, m, cond))
+                tasks.append(ClipTask(clip, str(path), cond, (m,), str(out), seed, backend, arch, rain_params,
+                                      params=params, fps=fps, color_order=color_order))
+
+    def plan(todo: list[int]) -> list[tuple[ClipTask, list[int]]]:
+        groups: dict[tuple[str, str], list[int]] = {}
+        for i in todo:
+            groups.setdefault((tasks[i].clip, tasks[i].condition), []).append(i)
+        return [(dataclasses.replace(tasks[ix[0]], models=tuple(tasks[i].models[0] for i in ix)), ix)
+                for ix in groups.values()]
+
+    def failed(i: int, msg: str) -> dict:
+        t = tasks[i]
+        return dict(clip=t.clip, model=t.models[0], condition=t.condition,
+                    error=msg if msg == "not run" else f"{t.path}: {msg}")
+
+    run = run_cached([t.entry(t.models[0]) for t in tasks], plan, run_clip_task, failed=failed, workers=workers,
+                     scheduler=scheduler, arch=arch, progress="clips" if progress else False,
+                     describe=describe_clip_task,
+                     on_record=None if on_record is None else (lambda i, r: on_record(r)))
+    return dict(zip(keys, run.records)), run
+
+
+@dataclass(frozen=True)
+class SweepTask:
+    """One clip x model setting x condition of a parameter sweep.
+
+    Attributes
+    ----------
+    clip, path : str
+    model : str
+    setting : tuple of (name, value)
+    key : str
+        :func:`cdnf_ti.experiments.paramsweep.setting_key` of the setting.
+    condition : {"clean", "rain"}
+    out : str
+        The sweep's output folder (the task writes under ``OUT/settings/<key>``).
+    seed : int
+    backend, arch : str
+    downscale : float
+        Frames are resized by this factor (1 = native size).
+    """
+
+    clip: str
+    path: str
+    model: str
+    setting: tuple
+    key: str
+    condition: str
+    out: str
+    seed: int = 0
+    backend: str = "taichi"
+    arch: str = "cpu"
+    downscale: float = 1.0
+
+    @property
+    def clip_task(self) -> ClipTask:
+        """The same work as a :class:`ClipTask` of one model under ``OUT/settings/<key>``."""
+        return ClipTask(self.clip, self.path, self.condition, (self.model,), str(setting_folder(self.out, self.key)),
+                        self.seed, self.backend, self.arch, None, setting=tuple(self.setting),
+                        downscale=float(self.downscale), key=self.key)
+
+
+def setting_folder(out: str | os.PathLike, key: str) -> Path:
+    """``OUT/settings/<key>``: where the traces of one sweep setting go."""
+    return Path(out) / "settings" / key
+
+
+def task_fingerprint(task: SweepTask) -> dict:
+    """The dataset fingerprint of the input plus the setting and the downscale factor."""
+    return task.clip_task.fingerprint(task.model)
+
+
+def run_sweep_task(task: SweepTask) -> dict:
+    """Run one model setting on one clip; save its trace and record (atomically).
+
+    Returns
+    -------
+    dict
+        The record (``error`` empty on success).
+    """
+    return run_clip_task(task.clip_task)[0]
+
+
+def describe_sweep_task(task: SweepTask, result: Any = None) -> str:
+    """Progress line of one task: ``c01 [cdnf h=0.1,alpha_off=0.7, clean]: 12.3 s``."""
+    line = f"{task.clip} [{task.model} {task.key}, {task.condition}]"
+    if isinstance(result, TaskFailed):
+        return f"{line}: error: {result}"
+    if isinstance(result, dict):
+        if result.get("error"):
+            return f"{line}: error: {result['error']}"
+        if result.get("seconds") is not None:
+            return f"{line}: {result['seconds']:.1f} s"
+    return line
+
+
+def run_sweep(tasks: Sequence[SweepTask], workers: int | None = None, scheduler: Any = None, arch: str = "cpu",
+              progress: bool | str = False) -> CachedRun:
+    """Every sweep task, reusing finished traces (the parameter-sweep engine); one unit per task."""
+    def failed(i: int, msg: str) -> dict:
+        t = tasks[i]
+        return dict(clip=t.clip, model=t.model, condition=t.condition, key=t.key,
+                    error=msg if msg == "not run" else f"{t.path}: {msg}")
+
+    return run_cached([t.clip_task.entry(t.model) for t in tasks], lambda todo: [(tasks[i], [i]) for i in todo],
+                      run_sweep_task, failed=failed, workers=workers, scheduler=scheduler, arch=arch,
+                      progress=progress, describe=describe_sweep_task)
+
+
+@dataclass
+class DatasetRun:
+    """Everything a dataset run produced.
+
+    Attributes
+    ----------
+    rows : list of dict
+        results.csv rows (:data:`~.layout.RESULT_COLUMNS`), in labels x condition x model order.
+    labels : list of ClipLabel
+    models : list of str
+    conditions : list of str
+    padding : Padding
+    out : Path
+    ran, skipped : int
+        (clip, model, condition) runs done now / found finished on disk.
+    sweep : list of dict
+        Threshold-sweep rows.
+    summary : dict
+        The summary.json content.
+    """
+
+    rows: list[dict]
+    labels: list[ClipLabel]
+    models: list[str]
+    conditions: list[str]
+    padding: Padding
+    out: Path
+    ran: int = 0
+    skipped: int = 0
+    sweep: list[dict] = field(default_factory=list)
+    summary: dict = field(default_factory=dict)
+    #: Videos in the dataset folder that have no row in the labels file (not run).
+    unlabelled: list[str] = field(default_factory=list)
+
+    @property
+    def n_errors(self) -> int:
+        return sum(1 for r in self.rows if r.get("error"))
+
+    @property
+    def failed(self) -> bool:
+        return self.n_errors > 0
+
+
+@dataclass
+class ParamSweepRun:
+    """What a parameter sweep produced."""
+
+    model: str
+    axes: list
+    settings: list
+    conditions: list
+    rows: list
+    records: dict
+    out: Path
+    ran: int = 0
+    skipped: int = 0
+    errors: list = field(default_factory=list)
+    nested: dict = field(default_factory=dict)
