@@ -49,6 +49,7 @@ from .cli_common import (
     EXIT_INTERRUPTED,
     EXIT_OK,
     ArgumentParser,
+    add_input_options,
     add_model_options,
     add_param_options,
     check_model_options,
@@ -688,11 +689,11 @@ def _parser() -> argparse.ArgumentParser:
                          "own frame rate in real time")
     add_model_options(ap)
     add_param_options(ap)
-    ap.add_argument("--fps", metavar="N", type=positive_float, default=None,
-                    help="frame rate in frames/s: a file's replay rate (default: its own), the rate the models "
-                         "assume for a camera (default: what it states) or a URL (default: 30)")
-    ap.add_argument("--color-order", choices=("bgr", "rgb"), default="bgr",
-                    help="channel order of colour .npy arrays (default: %(default)s)")
+    add_input_options(ap)
+    for action in ap._actions:  # the scheme's --fps, and what it means for a live source
+        if action.dest == "fps":
+            action.help += ("; for a file also its replay rate. A camera's or URL's rate as the models take it "
+                            "(default: what a camera states; 30 for a URL)")
     ap.add_argument("--jsonl", metavar="FILE", default=None, help="also write the JSON lines to FILE")
     ap.add_argument("--udp", metavar="HOST:PORT", type=udp_address, default=None,
                     help="also send each JSON line as one UDP datagram to HOST:PORT")
