@@ -5,6 +5,7 @@ Usage::
     python -m cdnf_ti.run                                # demo: Table I on the six basic stimuli
     python -m cdnf_ti.run run VIDEO [VIDEO ...] --out DIR  # per-frame traces + one summary line per video
     python -m cdnf_ti.run VIDEO [VIDEO ...] --out DIR      # the same ('run' may be left out)
+    python -m cdnf_ti.run live SOURCE [--model M,...]      # camera / stream URL: JSON lines (cdnf_ti.live)
     python -m cdnf_ti.run SUBCOMMAND ...                   # see SUBCOMMANDS below
 
 A first word that names a subcommand is the subcommand, even where a file or folder of that
@@ -78,6 +79,7 @@ SUBCOMMANDS: dict[str, str] = {
     "rain": "cdnf_ti.generate:rain_main",
     "dataset": "cdnf_ti.experiments.cli:dataset_main",
     "experiment": "cdnf_ti.experiments.cli:experiment_main",
+    "live": "cdnf_ti.live:main",
     "render": "cdnf_ti.render:render_main",
 }
 
