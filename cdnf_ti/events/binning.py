@@ -98,33 +98,39 @@ def checked(chunks: Iterable[np.ndarray], sensor_size: tuple[int, int], report: 
         if n == 0:
             continue
         start = report.n_events
-        t = ev["t"]
+        t = np.ascontiguousarray(ev["t"])
         if report.t_first is None:
             report.t_first = int(t[0])
-        run_max = np.maximum.accumulate(t)
-        if latest is not None:
-            np.maximum(run_max, latest, out=run_max)
-        prev = np.empty_like(run_max)
-        prev[0] = latest if latest is not None else t[0]
-        prev[1:] = run_max[:-1]
-        back = t < prev
-        if back.any():
-            i = int(np.argmax(back))
-            if report.first_backwards is None:
-                report.first_backwards = (start + i, int(t[i]), int(prev[i]))
-            report.n_backwards += int(back.sum())
-        latest = int(run_max[-1])
+        if (latest is not None and t[0] < latest) or not (t[1:] >= t[:-1]).all():
+            _backwards(t, latest, start, report)
+        latest = int(t[-1]) if latest is None else max(latest, int(t.max()))
         report.t_last = latest
-        inside = (ev["x"] < w) & (ev["y"] < h)
         report.n_events += n
         report.n_on += int(np.count_nonzero(ev["p"]))
-        if not inside.all():
+        x, y = ev["x"], ev["y"]
+        if int(x.max()) >= w or int(y.max()) >= h:
+            inside = (x < w) & (y < h)
             i = int(np.argmin(inside))
             if report.first_outside is None:
-                report.first_outside = (start + i, int(ev["x"][i]), int(ev["y"][i]))
+                report.first_outside = (start + i, int(x[i]), int(y[i]))
             report.n_outside += int(n - np.count_nonzero(inside))
             ev = ev[inside]
         yield ev
+
+
+def _backwards(t: np.ndarray, latest: int | None, start: int, report: EventReport) -> None:
+    """Count the events of ``t`` earlier than an event before them (``latest``: the chunks before)."""
+    prev = np.empty_like(t)
+    prev[0] = t[0] if latest is None else latest
+    np.maximum.accumulate(t[:-1], out=prev[1:])
+    if latest is not None:
+        np.maximum(prev, latest, out=prev)
+    back = t < prev
+    if back.any():
+        i = int(np.argmax(back))
+        if report.first_backwards is None:
+            report.first_backwards = (start + i, int(t[i]), int(prev[i]))
+        report.n_backwards += int(back.sum())
 
 
 def bin_events(chunks: Iterable[np.ndarray], sensor_size: tuple[int, int], bin_ms: float = DEFAULT_BIN_MS,
@@ -134,8 +140,8 @@ def bin_events(chunks: Iterable[np.ndarray], sensor_size: tuple[int, int], bin_m
     Parameters
     ----------
     chunks : iterable of structured arrays
-        Events inside the sensor (pass them through :func:`checked` first), in
-        time order; an event earlier than the bin being filled is counted in it.
+        Events inside the sensor (pass them through :func:`checked` first); an
+        event earlier than an event before it is counted in the bin being filled.
     sensor_size : (width, height)
     bin_ms : float
         Bin length, ms (> 0).
@@ -146,6 +152,12 @@ def bin_events(chunks: Iterable[np.ndarray], sensor_size: tuple[int, int], bin_m
     ------
     ndarray, shape (2, H, W), int64
         ``[0]`` the OFF counts, ``[1]`` the ON counts of one bin, bins in order.
+
+    Notes
+    -----
+    Per chunk: the running maximum of ``t`` (the timestamps themselves when in
+    order) is cut at the bin edges with ``searchsorted``, and each bin's part is
+    counted by one ``np.bincount`` over ``p H W + y W + x``.
     """
     if not bin_ms > 0:
         raise ValueError(f"bin length must be > 0 ms, got {bin_ms}")
@@ -154,30 +166,36 @@ def bin_events(chunks: Iterable[np.ndarray], sensor_size: tuple[int, int], bin_m
     bin_us = float(bin_ms) * 1000.0
     current = -1  # index of the bin being filled
     acc = None
+    latest = None
     for ev in chunks:
-        if ev.shape[0] == 0:
+        n = ev.shape[0]
+        if n == 0:
             continue
+        t = np.ascontiguousarray(ev["t"])
         if t0 is None:
-            t0 = np.floor(int(ev["t"][0]) / bin_us) * bin_us
-        b = np.floor((ev["t"] - t0) / bin_us).astype(np.int64)
-        np.maximum.accumulate(b, out=b)
-        np.maximum(b, max(current, 0), out=b)
-        flat = ev["p"].astype(np.int64) * plane
-        flat += ev["y"].astype(np.int64) * w
+            t0 = np.floor(int(t[0]) / bin_us) * bin_us
+        if (latest is not None and t[0] < latest) or not (t[1:] >= t[:-1]).all():
+            t = np.maximum.accumulate(t)
+            if latest is not None:
+                np.maximum(t, latest, out=t)
+        latest = int(t[-1])
+        k_first = max(int(np.floor((int(t[0]) - t0) / bin_us)), current, 0)
+        k_last = max(int(np.floor((latest - t0) / bin_us)), k_first)
+        cuts = np.searchsorted(t, t0 + np.arange(k_first + 1, k_last + 1) * bin_us, side="left").tolist()
+        flat = ev["y"].astype(np.int64)
+        flat *= w
         flat += ev["x"]
-        cuts = np.flatnonzero(b[1:] != b[:-1]) + 1
-        starts = np.concatenate(([0], cuts))
-        ends = np.concatenate((cuts, [b.size]))
-        for s, e in zip(starts.tolist(), ends.tolist()):
-            k = int(b[s])
+        flat += ev["p"].astype(np.int64) * plane
+        for k, s, e in zip(range(k_first, k_last + 1), [0] + cuts, cuts + [n]):
             if k != current:
                 if acc is not None:
                     yield acc.reshape(2, h, w)
                     for _ in range(current + 1, k):
                         yield np.zeros((2, h, w), dtype=np.int64)
                 current, acc = k, None
-            counts = np.bincount(flat[s:e], minlength=2 * plane)
-            acc = counts if acc is None else acc + counts
+            if e > s or acc is None:
+                counts = np.bincount(flat[s:e], minlength=2 * plane)
+                acc = counts if acc is None else acc + counts
     if acc is not None:
         yield acc.reshape(2, h, w)
 
