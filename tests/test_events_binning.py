@@ -87,3 +87,14 @@ def test_contrast_is_threshold_times_count_capped_at_one():
 def test_contrast_refuses_a_non_positive_threshold():
     with pytest.raises(ValueError):
         contrast_input(np.zeros((2, 2, 2)), 0.0)
+
+
+def test_bins_of_a_numpy_recording_start_at_its_clock_zero(tmp_path):
+    from cdnf_ti.events import open_event_source
+
+    ev = random_events(200, SIZE, duration_us=400_000, seed=3)
+    ev["t"] += 500_000  # a quiet first half second
+    np.save(tmp_path / "ev.npy", ev)
+    src = open_event_source(tmp_path / "ev.npy", SIZE, bin_ms=100.0)
+    bins = list(src.counts())
+    assert len(bins) == int(ev["t"][-1] // 100_000) + 1 and bins[0].sum() == 0

@@ -146,7 +146,8 @@ def bin_events(chunks: Iterable[np.ndarray], sensor_size: tuple[int, int], bin_m
     bin_ms : float
         Bin length, ms (> 0).
     t0 : float, optional
-        Start of bin 0, µs (default: ``floor(t_first / b) b``).
+        Start of bin 0, µs; the bins from there to the first event are produced
+        (empty). Default: ``floor(t_first / b) b``.
 
     Yields
     ------
@@ -164,8 +165,8 @@ def bin_events(chunks: Iterable[np.ndarray], sensor_size: tuple[int, int], bin_m
     w, h = sensor_size
     plane = w * h
     bin_us = float(bin_ms) * 1000.0
-    current = -1  # index of the bin being filled
-    acc = None
+    # the bin being filled and its counts: from bin 0 when t0 is given, else from the first event's bin
+    current, acc = (0, np.zeros(2 * plane, dtype=np.int64)) if t0 is not None else (-1, None)
     latest = None
     for ev in chunks:
         n = ev.shape[0]

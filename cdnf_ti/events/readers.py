@@ -56,6 +56,10 @@ class EventFile:
         From the file's header; ``None`` when it states none.
     n_events : int or None
         When known without reading the events.
+    t_start : int or None
+        The recording's start on its clock, µs, where the layout defines one: 0 for
+        ``.npy``/``.npz`` (timestamps count from the recording's start, as the emulator
+        writes them), ``t_offset`` for DSEC HDF5; ``None`` for camera clocks (AEDAT4, RAW, DAT).
     """
 
     path: str
@@ -63,6 +67,7 @@ class EventFile:
     sensor_size: tuple[int, int] | None
     n_events: int | None
     _chunks: Callable[[], Iterator[np.ndarray]]
+    t_start: int | None = None
 
     def chunks(self) -> Iterator[np.ndarray]:
         """The events in file order, as structured chunks of :data:`~cdnf_ti.events.types.EVENT_DTYPE`."""
@@ -182,7 +187,7 @@ def _open_npy(path: str) -> EventFile:
             c = arr[i:i + CHUNK_EVENTS]
             yield to_events(c["t"], c["x"], c["y"], c["p"])
 
-    return EventFile(path, "npy", None, int(arr.shape[0]), gen)
+    return EventFile(path, "npy", None, int(arr.shape[0]), gen, t_start=0)
 
 
 def _open_npz(path: str) -> EventFile:
@@ -215,7 +220,7 @@ def _open_npz(path: str) -> EventFile:
         for i in range(0, n, CHUNK_EVENTS):
             yield to_events(*(c[i:i + CHUNK_EVENTS] for c in cols))
 
-    return EventFile(path, "npz", None, None, gen)
+    return EventFile(path, "npz", None, None, gen, t_start=0)
 
 
 # -- HDF5 (DSEC) -----------------------------------------------------------------------------------
@@ -243,6 +248,7 @@ def _open_hdf5(path: str) -> EventFile:
             n = int(g["t"].shape[0])
             lengths = {k: int(g[k].shape[0]) for k in _FIELDS}
             size = None
+            t_start = int(np.asarray(f["t_offset"][()]).item()) if "t_offset" in f else 0
             if "width" in f.attrs and "height" in f.attrs:
                 size = (int(f.attrs["width"]), int(f.attrs["height"]))
     except OSError as e:
@@ -254,7 +260,7 @@ def _open_hdf5(path: str) -> EventFile:
     def gen() -> Iterator[np.ndarray]:
         with h5py.File(path, "r") as f:
             g = f["events"]
-            t_offset = int(np.asarray(f["t_offset"][()]).item()) if "t_offset" in f else 0
+            t_offset = t_start
             for i in range(0, n, CHUNK_EVENTS):
                 try:
                     cols = [g[k][i:i + CHUNK_EVENTS] for k in _FIELDS]
@@ -264,7 +270,7 @@ def _open_hdf5(path: str) -> EventFile:
                 cols[0] = cols[0].astype(np.int64) + t_offset
                 yield to_events(*cols)
 
-    return EventFile(path, "hdf5", size, n, gen)
+    return EventFile(path, "hdf5", size, n, gen, t_start=t_start)
 
 
 # -- AEDAT 4 -------------------------------------------------------------------------------------

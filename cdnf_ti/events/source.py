@@ -24,8 +24,10 @@ class EventSource:
         From ``--sensor-size``, else the header, else inferred (``inferred``).
     bin_ms : float
         Bin length, ms; ``fps = 1000 / bin_ms`` bins per second.
-    t0 : int or None
-        Start of bin 0, µs (None: the first event).
+    t0 : float or None
+        Start of bin 0, µs: the recording's start where its layout defines one
+        (:attr:`~cdnf_ti.events.readers.EventFile.t_start`), else ``None``: the start of
+        the bin holding the first event.
     report : EventReport
         Filled while :meth:`counts` runs.
     """
@@ -33,7 +35,7 @@ class EventSource:
     events: EventFile
     sensor_size: tuple[int, int]
     bin_ms: float = DEFAULT_BIN_MS
-    t0: int | None = None
+    t0: float | None = None
     inferred: bool = False
     report: EventReport = field(default_factory=EventReport)
 
@@ -74,7 +76,7 @@ def infer_sensor_size(events: EventFile) -> tuple[int, int]:
 
 
 def open_event_source(path: str | os.PathLike, sensor_size: tuple[int, int] | None = None,
-                      bin_ms: float = DEFAULT_BIN_MS, t0: int | None = None, quiet: bool = False) -> EventSource:
+                      bin_ms: float = DEFAULT_BIN_MS, t0: float | None = None, quiet: bool = False) -> EventSource:
     """Open an event recording for binning.
 
     Parameters
@@ -84,6 +86,8 @@ def open_event_source(path: str | os.PathLike, sensor_size: tuple[int, int] | No
         the events and a ``note:`` line says so (unless ``quiet``).
     bin_ms : float
         Bin length, ms.
+    t0 : float, optional
+        Start of bin 0, µs (default: the file's :attr:`~cdnf_ti.events.readers.EventFile.t_start`).
 
     Raises
     ------
@@ -101,4 +105,4 @@ def open_event_source(path: str | os.PathLike, sensor_size: tuple[int, int] | No
         if not quiet:
             print(f"note: {path}: the file states no sensor size; using {size[0]}x{size[1]}, the smallest that "
                   "holds every event (give --sensor-size WxH to set it)", file=sys.stderr)
-    return EventSource(ef, (int(size[0]), int(size[1])), float(bin_ms), t0, inferred)
+    return EventSource(ef, (int(size[0]), int(size[1])), float(bin_ms), ef.t_start if t0 is None else t0, inferred)

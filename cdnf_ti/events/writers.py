@@ -26,13 +26,14 @@ def write_npy(path: str | os.PathLike, events: np.ndarray) -> None:
     atomic_write(path, write)
 
 
-def write_h5(path: str | os.PathLike, events: np.ndarray, sensor_size: tuple[int, int]) -> None:
+def write_h5(path: str | os.PathLike, events: np.ndarray, sensor_size: tuple[int, int], t_offset: int = 0) -> None:
     """Save ``events`` in the DSEC layout.
 
     ``events/t`` (µs since ``t_offset``, int64), ``events/x``, ``events/y``
-    (uint16), ``events/p`` (uint8, 1 = ON), ``t_offset`` (µs, the first
-    timestamp), ``ms_to_idx`` (``ms_to_idx[m]`` is the first event at or after
-    ``m`` ms past ``t_offset``), and root attributes ``width``, ``height`` (DSEC's
+    (uint16), ``events/p`` (uint8, 1 = ON), ``t_offset`` (µs, the recording's
+    start; 0: the emulator's clock starts at the video's first frame),
+    ``ms_to_idx`` (``ms_to_idx[m]`` is the first event at or after ``m`` ms past
+    ``t_offset``), and root attributes ``width``, ``height`` (DSEC's
     own files have none; cdnf_ti reads them when present). Gzip-compressed, so
     no plugin is needed to read it back.
     """
@@ -41,9 +42,8 @@ def write_h5(path: str | os.PathLike, events: np.ndarray, sensor_size: tuple[int
     except ImportError:
         raise UserError(f"{path}: writing HDF5 needs the h5py package ({_INSTALL})") from None
     ev = np.asarray(events, dtype=EVENT_DTYPE)
-    t_offset = int(ev["t"][0]) if ev.size else 0
     t = ev["t"] - t_offset
-    ms = np.arange(0, (int(t.max()) // 1000 + 2) if t.size else 1) * 1000
+    ms = np.arange(0, (max(int(t.max()), 0) // 1000 + 2) if t.size else 1) * 1000
 
     def write(tmp: str) -> None:
         with h5py.File(tmp, "w") as f:
