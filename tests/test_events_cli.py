@@ -65,3 +65,11 @@ def test_info_warns_of_events_outside_the_given_sensor_size(tmp_path, capsys):
     assert main(["events", "--info", str(f), "--sensor-size", "32x48"]) == 0
     err = capsys.readouterr().err
     assert f"warning: {f}: " in err and "outside the 32x48 sensor" in err
+
+
+def test_running_a_model_on_an_event_file_names_the_file_and_the_way(tmp_path, capsys):
+    f = tmp_path / "ev.npy"
+    np.save(f, random_events(100, (64, 48), seed=2))
+    assert main([str(f), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("error:") == 1 and f"error: {f}: is an event-camera recording" in err

@@ -93,12 +93,16 @@ def parse_sensor_size(text: str) -> tuple[int, int]:
 
 
 def is_event_file(path: str | os.PathLike) -> bool:
-    """Whether ``path`` is an event recording (a ``.npy`` only when it is a structured array with
-    fields ``t``, ``x``, ``y``, ``p``; a frame array is not)."""
+    """Whether ``path`` is an event recording: a ``.npy`` only when it is a structured array with
+    fields ``t``, ``x``, ``y``, ``p`` (a frame array is not), a ``.raw``/``.dat`` only with a
+    Prophesee ``% `` header (a VCD ``.dat`` is a video)."""
     p = Path(path)
     ext = p.suffix.lower()
     if ext not in EVENT_EXTENSIONS or not p.is_file():
         return False
+    if ext in (".raw", ".dat"):
+        with open(p, "rb") as f:
+            return f.read(2) == b"% "
     if ext == ".npy":
         try:
             dtype = np.load(p, mmap_mode="r", allow_pickle=False).dtype
