@@ -56,6 +56,8 @@ _EVT2_KNOWN = np.zeros(16, dtype=bool)
 _EVT2_KNOWN[[0x0, 0x1, 0x8, 0xA, 0xE, 0xF]] = True
 _EVT3_KNOWN = np.zeros(16, dtype=bool)
 _EVT3_KNOWN[[0x0, 0x2, 0x3, 0x4, 0x5, 0x6, 0x7, 0x8, 0xA, 0xE, 0xF]] = True
+#: Set bits of every 12-bit validity mask.
+_POPCOUNT12 = np.array([bin(m).count("1") for m in range(1 << 12)], dtype=np.int64)
 
 
 @dataclass
@@ -127,10 +129,8 @@ def read_header(f: BinaryIO) -> PropheseeHeader:
 
 def _ffill(values: np.ndarray, mask: np.ndarray, init) -> np.ndarray:
     """``out[i] = values[j]`` for the last ``j <= i`` with ``mask[j]``; ``init`` where there is none."""
-    idx = np.where(mask, np.arange(mask.size), -1)
-    np.maximum.accumulate(idx, out=idx)
-    out = values[np.maximum(idx, 0)]
-    return np.where(idx >= 0, out, init)
+    rank = np.cumsum(mask, dtype=np.int64) - 1
+    return np.concatenate(([init], values[mask]))[rank + 1]
 
 
 def _first_unknown(path: str, types: np.ndarray, known: np.ndarray, offset: int, word_bytes: int, name: str) -> None:
@@ -181,63 +181,71 @@ class _Evt3State:
 def decode_evt3(words: np.ndarray, state: _Evt3State, path: str = "", offset: int = 0) -> np.ndarray:
     """Decode EVT 3.0 words (uint16) into events, carrying ``state`` across calls.
 
-    Vectorised: the state each word sees (``y``, base ``x``, polarity, time) is
-    the last value set before it (a forward fill), and every event-carrying word
-    becomes a 12-bit validity mask at a base ``x`` (``EVT_ADDR_X`` is the mask 1
-    at its own ``x``), expanded in one step.
+    Vectorised: the state an event word sees (``y``, base ``x``, polarity, time)
+    is the value set by the last word of that kind before it, found by a running
+    count of those words (``np.cumsum`` of their mask: the rank of the last one);
+    every event word becomes a 12-bit validity mask at a base ``x``
+    (``EVT_ADDR_X`` is the mask 1 at its own ``x``), expanded in one step.
     """
     types = (words >> 12).astype(np.uint8)
     _first_unknown(path, types, _EVT3_KNOWN, offset, 2, "EVT 3.0")
     payload = (words & 0x0FFF).astype(np.int64)
-    n = words.size
+    is_x, is_v12, is_v8 = types == 0x2, types == 0x4, types == 0x5
+    pos = np.flatnonzero(is_x | is_v12 | is_v8)  # the event words
+
+    def last(mask: np.ndarray, values: np.ndarray, init) -> np.ndarray:
+        """At each event word: ``values`` (one per word of ``mask``) of the last such word before it, or ``init``."""
+        rank = np.cumsum(mask, dtype=np.int64)[pos] - 1
+        vals = np.concatenate(([init], values)) if values.size else np.array([init], dtype=np.int64)
+        return vals[rank + 1]
+
     # --- time: 24-bit base (high 12 | low 12), wraps counted on the high part
     is_high, is_low = types == 0x8, types == 0x6
     highs = payload[is_high]
+    init_high = (state.epoch << 12) | state.time_high  # before the block's first EVT_TIME_HIGH
+    high_full = highs
     if highs.size:
-        prev = np.concatenate(([state.time_high], highs[:-1])) if state.seen_high else np.concatenate(
-            ([highs[0]], highs[:-1]))
-        wraps = np.cumsum(highs - prev < -2048)
-        epoch_at = np.zeros(n, dtype=np.int64)
-        epoch_at[is_high] = state.epoch + wraps
-        epoch = _ffill(epoch_at, is_high, state.epoch)
-        high_full = np.zeros(n, dtype=np.int64)
-        high_full[is_high] = highs
-        high = _ffill(high_full, is_high, state.time_high)
-        state.epoch, state.time_high, state.seen_high = int(epoch[-1]), int(highs[-1]), True
-    else:
-        epoch = np.full(n, state.epoch, dtype=np.int64)
-        high = np.full(n, state.time_high, dtype=np.int64)
-    low = _ffill(payload, is_low, state.time_low)
-    if is_low.any():
-        state.time_low = int(payload[is_low][-1])
-    t = (((epoch << 12) | high) << 12) | low
+        first_prev = state.time_high if state.seen_high else highs[0]
+        prev = np.concatenate(([first_prev], highs[:-1]))
+        epochs = state.epoch + np.cumsum(highs - prev < -2048)
+        high_full = (epochs << 12) | highs
+        state.epoch, state.time_high, state.seen_high = int(epochs[-1]), int(highs[-1]), True
+    lows = payload[is_low]
+    t = last(is_high, high_full, init_high) << 12
+    t |= last(is_low, lows, state.time_low)
     # --- y, polarity of vectors, base x
-    is_y = types == 0x0
-    y = _ffill(payload & 0x7FF, is_y, state.y)
-    if is_y.any():
-        state.y = int(y[-1])
-    is_base = types == 0x3
-    vec_pol = _ffill((payload >> 11) & 1, is_base, state.polarity)
-    if is_base.any():
-        state.polarity = int(vec_pol[-1])
-    step = np.where(types == 0x4, 12, np.where(types == 0x5, 8, 0)).astype(np.int64)
+    is_y, is_base = types == 0x0, types == 0x3
+    y = last(is_y, payload[is_y] & 0x7FF, state.y)
+    base_words = payload[is_base]
+    vec_pol = last(is_base, base_words >> 11, state.polarity)
+    step = np.where(is_v12, 12, 0) + np.where(is_v8, 8, 0)
     cum = np.cumsum(step)
-    before = cum - step
-    anchor = np.where(is_base, (payload & 0x7FF) - cum, 0)  # base value minus the steps so far
-    base = _ffill(anchor, is_base, state.base_x) + before
-    state.base_x = int(base[-1] + step[-1]) if n else state.base_x
-    # --- event words -> (mask, x0, polarity)
-    is_x, is_v12, is_v8 = types == 0x2, types == 0x4, types == 0x5
-    ev = is_x | is_v12 | is_v8
-    mask = np.where(is_x, 1, np.where(is_v12, payload, payload & 0xFF))[ev]
-    x0 = np.where(is_x, payload & 0x7FF, base)[ev]
-    pol = np.where(is_x, (payload >> 11) & 1, vec_pol)[ev]
-    bits = (mask[:, None] >> np.arange(12)) & 1
-    rows, cols = np.nonzero(bits)
+    base = last(is_base, (base_words & 0x7FF) - cum[is_base], state.base_x) + cum[pos] - step[pos]
+    # --- carry the state to the next block
+    if lows.size:
+        state.time_low = int(lows[-1])
+    if np.any(is_y):
+        state.y = int(payload[is_y][-1] & 0x7FF)
+    if base_words.size:
+        state.polarity = int(base_words[-1] >> 11)
+        state.base_x = int((base_words[-1] & 0x7FF) - cum[is_base][-1] + cum[-1])
+    elif cum.size:
+        state.base_x += int(cum[-1])
+    # --- event words -> (mask, x0, polarity) -> events
+    pw, tw = payload[pos], types[pos]
+    single = tw == 0x2
+    mask = np.where(single, 1, np.where(tw == 0x4, pw, pw & 0xFF))
+    x0 = np.where(single, pw & 0x7FF, base)
+    pol = np.where(single, (pw >> 11) & 1, vec_pol)
+    rows = np.repeat(np.arange(mask.size), _POPCOUNT12[mask])  # the event word of each event, in order
+    cols = np.zeros(rows.size, dtype=np.int64)  # bit of the event in its word's mask (0 for EVT_ADDR_X)
+    vec = ~single
+    if vec.any():
+        cols[vec[rows]] = np.nonzero((mask[vec][:, None] >> np.arange(12)) & 1)[1]
     out = np.empty(rows.size, dtype=EVENT_DTYPE)
-    out["t"] = t[ev][rows]
+    out["t"] = t[rows]
     out["x"] = x0[rows] + cols
-    out["y"] = y[ev][rows]
+    out["y"] = y[rows]
     out["p"] = pol[rows]
     return out
 
