@@ -202,3 +202,15 @@ def test_raw_file_without_encoding_is_refused(tmp_path):
     f = write(tmp_path / "x.raw", raw_header({"date": "today"}) + b"\0\0\0\0")
     with pytest.raises(InputError, match="names no encoding"):
         open_events(f)
+
+
+def test_dsec_blosc_compressed_hdf5_is_read(tmp_path):
+    h5py = pytest.importorskip("h5py")
+    hdf5plugin = pytest.importorskip("hdf5plugin")
+    ev = random_events(3000, SIZE, seed=13)
+    f = tmp_path / "events.h5"
+    with h5py.File(f, "w") as h:  # as DSEC ships them: Blosc (zstd) compression
+        for k in "txyp":
+            h.create_dataset(f"events/{k}", data=ev[k], **hdf5plugin.Blosc(cname="zstd", clevel=1))
+        h.create_dataset("t_offset", data=np.int64(0))
+    np.testing.assert_array_equal(read_all(f), ev)

@@ -53,7 +53,8 @@ def add_event_options(ap: argparse.ArgumentParser) -> None:
                     help="sensor size of event recordings (default: the file's header; else the smallest that "
                          "holds every event)")
     ap.add_argument("--bin-ms", type=positive_float, default=DEFAULT_BIN_MS,
-                    help="events are binned into frames this long, ms (default: %(default)s, one 30 fps frame)")
+                    help="events are binned into frames this long, ms (default: 1000/30 = 33.333..., one 30 fps "
+                         "frame)")
     ap.add_argument("--event-threshold", type=positive_float, default=DEFAULT_EVENT_THRESHOLD, metavar="C",
                     help="the sensor's log-contrast threshold C: n events at a pixel in a bin give the models a "
                          "contrast min(1, n C) (default: %(default)s); for 'events VIDEO' the emulated threshold")
@@ -117,7 +118,7 @@ def _info(args) -> int:
         span = (r.t_last - r.t_first) / 1e6 if r.n_events else 0.0
         on = 100.0 * r.n_on / r.n_events if r.n_events else 0.0
         print(f"{path}: {src.events.format}, {w}x{h} ({origin}), {r.n_events} events ({on:.1f}% ON), "
-              f"t {r.t_first}..{r.t_last} us ({span:.3f} s), {n_bins} bins of {args.bin_ms:g} ms")
+              f"t {r.t_first}..{r.t_last} us ({span:.3f} s), {n_bins} bins of {args.bin_ms:.6g} ms")
         for line in r.problems():
             print(f"warning: {path}: {line}", file=sys.stderr)
         ok += 1

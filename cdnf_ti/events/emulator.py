@@ -20,8 +20,10 @@ Per pixel, as ESIM (Rebecq et al., CoRL 2018) and v2e (Hu et al., CVPR-W 2021):
   leave the reference as it is.
 
 Not modelled (v2e has them): the photoreceptor's intensity-dependent low-pass
-bandwidth, leak events, temporal noise of the thresholds. Timestamps are whole µs,
-frame ``k`` at ``round(k 1e6 / fps)``. Every random draw comes from one
+bandwidth, leak events, temporal noise of the thresholds. Frame ``k`` is at
+``round(k 1e6 / fps)`` µs; an event's timestamp is its crossing time rounded down
+to the µs and before the next frame's, so the events between frames ``k - 1`` and
+``k`` fall in bin ``k - 1`` of bins one frame long. Every random draw comes from one
 ``numpy.random.default_rng(seed)``.
 """
 from __future__ import annotations
@@ -135,7 +137,7 @@ def _crossings(l_prev, l_new, ref, c_on, c_off, t_a, t_b, last, refractory_us) -
         for j in range(1, int(nn.max()) + 1):
             sel = nn >= j
             frac = np.clip((r0[sel] + j * step[sel] - a[sel]) / d[sel], 0.0, 1.0)
-            t = np.rint(t_a + frac * (t_b - t_a))
+            t = np.minimum(np.floor(t_a + frac * (t_b - t_a)), max(t_b - 1, t_a))
             ok = t - lst[sel] >= refractory_us
             idx = np.flatnonzero(sel)[ok]
             lst[idx] = t[ok]
