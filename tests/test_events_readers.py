@@ -214,3 +214,29 @@ def test_dsec_blosc_compressed_hdf5_is_read(tmp_path):
             h.create_dataset(f"events/{k}", data=ev[k], **hdf5plugin.Blosc(cname="zstd", clevel=1))
         h.create_dataset("t_offset", data=np.int64(0))
     np.testing.assert_array_equal(read_all(f), ev)
+
+
+def chunks_of(ev: np.ndarray, n: int):
+    return iter([ev[i:i + n] for i in range(0, ev.size, n)])
+
+
+def test_npy_writer_streams_chunks_and_reads_back(tmp_path):
+    from cdnf_ti.events.writers import write_events
+
+    ev = random_events(5000, SIZE, duration_us=50_000, seed=14)
+    assert write_events(tmp_path / "ev.npy", chunks_of(ev, 777), SIZE) == ev.size
+    np.testing.assert_array_equal(read_all(tmp_path / "ev.npy"), ev)
+
+
+def test_hdf5_writer_streams_chunks_with_dsec_ms_to_idx(tmp_path):
+    h5py = pytest.importorskip("h5py")
+    from cdnf_ti.events.writers import write_events
+
+    ev = random_events(5000, SIZE, duration_us=50_000, seed=15)
+    assert write_events(tmp_path / "ev.h5", chunks_of(ev, 777), SIZE) == ev.size
+    np.testing.assert_array_equal(read_all(tmp_path / "ev.h5"), ev)
+    assert open_events(tmp_path / "ev.h5").sensor_size == SIZE
+    with h5py.File(tmp_path / "ev.h5") as f:  # DSEC: ms_to_idx[m] = first event at or after m ms
+        want = np.searchsorted(ev["t"], np.arange(len(f["ms_to_idx"])) * 1000, side="left")
+        np.testing.assert_array_equal(f["ms_to_idx"][()], want)
+        assert len(want) == ev["t"][-1] // 1000 + 2

@@ -168,16 +168,21 @@ def _emulate(args) -> int:
                 from tqdm import tqdm
                 chunks = tqdm(chunks, total=None if src.n_frames is None else max(src.n_frames - 1, 0),
                               desc=f"{spec} -> events", unit="frame", leave=False)
-            parts = list(chunks)
-            from .types import EVENT_DTYPE
-            events = np.concatenate(parts) if parts else np.empty(0, dtype=EVENT_DTYPE)
-            write_events(out, events, (w, h))
+            counts = [0, 0]  # events, ON events
+
+            def counted(chunks=chunks, counts=counts):
+                for c in chunks:
+                    counts[0] += c.shape[0]
+                    counts[1] += int(np.count_nonzero(c["p"]))
+                    yield c
+
+            write_events(out, counted(), (w, h))
         except UserError as e:
             print(f"error: {e}", file=sys.stderr)
             failed += 1
             continue
-        n_on = int(np.count_nonzero(events["p"]))
-        print(f"{spec} -> {out}: {events.size} events ({n_on} ON, {events.size - n_on} OFF), {w}x{h}, "
+        n, n_on = counts
+        print(f"{spec} -> {out}: {n} events ({n_on} ON, {n - n_on} OFF), {w}x{h}, "
               f"{src.fps:g} fps")
         ok += 1
     if ok and failed:
