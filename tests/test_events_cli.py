@@ -73,3 +73,12 @@ def test_running_a_model_on_an_event_file_names_the_file_and_the_way(tmp_path, c
     assert main([str(f), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert err.count("error:") == 1 and f"error: {f}: is an event-camera recording" in err
+
+
+def test_info_on_a_folder_reports_every_recording_in_it(tmp_path, capsys):
+    for i in range(2):
+        np.save(tmp_path / f"rec{i}.npy", random_events(50, (64, 48), seed=i))
+    np.save(tmp_path / "frames.npy", np.zeros((2, 4, 4), dtype=np.uint8))  # not a recording: skipped
+    assert main(["events", "--info", str(tmp_path), "--sensor-size", "64x48"]) == 0
+    out = capsys.readouterr().out
+    assert out.count(": npy, 64x48 (--sensor-size)") == 2 and "frames.npy" not in out

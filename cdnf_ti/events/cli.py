@@ -66,7 +66,8 @@ def _parser() -> argparse.ArgumentParser:
                                     "summarise event recordings (.aedat4, .raw EVT2/EVT3, .dat, DSEC .h5, .npy, "
                                     ".npz).")
     ap.add_argument("inputs", nargs="+", metavar="INPUT",
-                    help="videos (file, image folder, .npy frames, stim:NAME?...); with --info, event recordings")
+                    help="videos (file, image folder, .npy frames, stim:NAME?...); with --info, event recordings "
+                         "or folders of them")
     ap.add_argument("--out", default=None,
                     help="FILE.npy or FILE.h5 for one video; else a folder (default: events_out)")
     ap.add_argument("--format", choices=("npy", "h5"), default="npy",
@@ -102,9 +103,22 @@ def events_main(argv: Sequence[str]) -> int:
     return _emulate(args)
 
 
+def _recordings(inputs: Sequence[str]) -> list[str]:
+    """The inputs, a folder replaced by the event recordings in it (sorted by name; none: the folder, which
+    then fails with its own error line)."""
+    from .readers import is_event_file
+
+    out = []
+    for spec in inputs:
+        p = Path(spec)
+        found = sorted(str(f) for f in p.iterdir() if is_event_file(f)) if p.is_dir() else []
+        out.extend(found or [spec])
+    return out
+
+
 def _info(args) -> int:
     ok = failed = 0
-    for path in args.inputs:
+    for path in _recordings(args.inputs):
         try:
             src = open_event_source(path, args.sensor_size, args.bin_ms)
             n_bins = sum(1 for _ in src.counts())
