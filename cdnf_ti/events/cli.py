@@ -18,12 +18,15 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+from tqdm import tqdm
 
-from ..cli_common import EXIT_FAILED, EXIT_OK, EXIT_USAGE, ArgumentParser, positive_float, seed_arg
-from ..errors import InputError, UserError
+from ..cli_common import EXIT_FAILED, EXIT_OK, EXIT_USAGE, ArgumentParser, positive_float, seed_arg, unique_names
+from ..errors import UserError
+from ..frames import iter_grey
+from ..inputs import STIM_PREFIX, parse_stim_spec, resolve_input, stimulus_label
 from .binning import DEFAULT_BIN_MS, DEFAULT_EVENT_THRESHOLD
 from .emulator import EmulatorParams, emulate
-from .readers import parse_sensor_size
+from .readers import is_event_file, parse_sensor_size
 from .source import open_event_source
 from .writers import WRITE_EXTENSIONS, write_events
 
@@ -106,8 +109,6 @@ def events_main(argv: Sequence[str]) -> int:
 def _recordings(inputs: Sequence[str]) -> list[str]:
     """The inputs, a folder replaced by the event recordings in it (sorted by name; none: the folder, which
     then fails with its own error line)."""
-    from .readers import is_event_file
-
     out = []
     for spec in inputs:
         p = Path(spec)
@@ -145,9 +146,6 @@ def _outputs(args) -> list[Path]:
         if len(args.inputs) != 1:
             raise UserError(f"--out {out}: one output file takes one input; give a folder for {len(args.inputs)}")
         return [Path(out)]
-    from ..cli_common import unique_names
-    from ..inputs import STIM_PREFIX, parse_stim_spec, stimulus_label
-
     def name(spec: str) -> str:
         if spec.startswith(STIM_PREFIX):
             try:
@@ -161,9 +159,6 @@ def _outputs(args) -> list[Path]:
 
 
 def _emulate(args) -> int:
-    from ..frames import iter_grey
-    from ..inputs import resolve_input
-
     c = args.event_threshold
     try:
         params = EmulatorParams(threshold_on=args.threshold_on or c, threshold_off=args.threshold_off or c,
@@ -179,7 +174,6 @@ def _emulate(args) -> int:
             h, w = src.shape
             chunks = emulate(iter_grey(src), src.fps, params, seed=args.seed)
             if not args.no_progress:
-                from tqdm import tqdm
                 chunks = tqdm(chunks, total=None if src.n_frames is None else max(src.n_frames - 1, 0),
                               desc=f"{spec} -> events", unit="frame", leave=False)
             counts = [0, 0]  # events, ON events
@@ -204,4 +198,4 @@ def _emulate(args) -> int:
     return EXIT_OK if ok else EXIT_USAGE
 
 
-__all__ = ["add_event_options", "events_main", "sensor_size_arg", "InputError"]
+__all__ = ["add_event_options", "events_main", "sensor_size_arg"]
