@@ -20,7 +20,17 @@ from typing import Sequence
 import numpy as np
 from tqdm import tqdm
 
-from ..cli_common import EXIT_FAILED, EXIT_OK, EXIT_USAGE, ArgumentParser, positive_float, seed_arg, unique_names
+from ..cli_common import (
+    DEFAULT_OUT,
+    EXIT_FAILED,
+    EXIT_OK,
+    EXIT_USAGE,
+    ArgumentParser,
+    add_input_options,
+    positive_float,
+    seed_arg,
+    unique_names,
+)
 from ..errors import UserError
 from ..frames import iter_grey
 from ..inputs import STIM_PREFIX, parse_stim_spec, resolve_input, stimulus_label
@@ -71,8 +81,9 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("inputs", nargs="+", metavar="INPUT",
                     help="videos (file, image folder, .npy frames, stim:NAME?...); with --info, event recordings "
                          "or folders of them")
-    ap.add_argument("--out", default=None,
-                    help="FILE.npy or FILE.h5 for one video; else a folder (default: events_out)")
+    ap.add_argument("--out", default=None, metavar="DIR",
+                    help=f"output folder (created), or the event file (.npy/.h5) when the command makes one "
+                         f"(default: {DEFAULT_OUT}/events)")
     ap.add_argument("--format", choices=("npy", "h5"), default="npy",
                     help="file format when --out is a folder (default: %(default)s)")
     ap.add_argument("--info", action="store_true", help="summarise event recordings instead of emulating")
@@ -90,10 +101,7 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--log-eps", type=positive_float, default=0.01,
                     help="eps of the log intensity ln(L + eps), L in [0, 1] (default: %(default)s)")
     ap.add_argument("--seed", type=seed_arg, default=0, help="seed of the mismatch and the noise (default: 0)")
-    ap.add_argument("--fps", type=positive_float, default=None,
-                    help="frame rate of the videos (default: a video's own; 30 for folders and arrays)")
-    ap.add_argument("--color-order", choices=("bgr", "rgb"), default="bgr",
-                    help="channel order of colour .npy arrays (default: %(default)s)")
+    add_input_options(ap)
     ap.add_argument("--no-progress", action="store_true", help="hide progress bars")
     return ap
 
@@ -141,7 +149,7 @@ def _info(args) -> int:
 
 
 def _outputs(args) -> list[Path]:
-    out = args.out or "events_out"
+    out = args.out or str(Path(DEFAULT_OUT) / "events")
     if Path(out).suffix.lower() in WRITE_EXTENSIONS:
         if len(args.inputs) != 1:
             raise UserError(f"--out {out}: one output file takes one input; give a folder for {len(args.inputs)}")
