@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 
 from .errors import InputError
+from .events.readers import is_event_file
 
 T = TypeVar("T")
 
@@ -271,6 +272,10 @@ def open_source(path: str | os.PathLike, fps: float | None = None, color_order: 
         raise InputError(path, "permission denied")
     if p.stat().st_size == 0:
         raise InputError(path, "file is empty")
+    if is_event_file(p):
+        raise InputError(path, "is an event-camera recording, not frames: the models take events through their "
+                               "ON/OFF input stage (README, 'Event cameras'); 'python -m cdnf_ti.run events --info' "
+                               "summarises it")
     if p.suffix.lower() == ".npy":
         return open_npy(p, fps, color_order)
     if p.suffix.lower() in IMAGE_EXTENSIONS:

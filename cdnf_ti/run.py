@@ -81,6 +81,7 @@ SUBCOMMANDS: dict[str, str] = {
     "experiment": "cdnf_ti.experiments.cli:experiment_main",
     "live": "cdnf_ti.live:main",
     "render": "cdnf_ti.render:render_main",
+    "events": "cdnf_ti.events.cli:events_main",
 }
 
 

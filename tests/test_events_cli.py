@@ -1,0 +1,84 @@
+"""``python -m cdnf_ti.run events``: emulate videos into event files, summarise recordings, bad inputs."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from event_encoders import encode_evt3, random_events, raw_header
+
+from cdnf_ti.events import open_events
+from cdnf_ti.run import main
+
+STIM = "stim:dark_looming?size=48&duration=0.5"
+
+
+def test_events_turns_a_stimulus_into_a_readable_npy_file(tmp_path, capsys):
+    out = tmp_path / "dl.npy"
+    assert main(["events", STIM, "--out", str(out), "--no-progress"]) == 0
+    ev = np.concatenate(list(open_events(out).chunks()))
+    assert ev.size > 0 and not ev["p"].any()
+    assert f"-> {out}: {ev.size} events" in capsys.readouterr().out
+
+
+def test_events_writes_dsec_hdf5_with_the_sensor_size(tmp_path):
+    pytest.importorskip("h5py")
+    assert main(["events", STIM, "--out", str(tmp_path / "dl.h5"), "--no-progress"]) == 0
+    assert open_events(tmp_path / "dl.h5").sensor_size == (48, 48)
+
+
+def test_events_writes_one_file_per_input_into_a_folder(tmp_path):
+    assert main(["events", STIM, "stim:light_looming?size=48&duration=0.5", "--out", str(tmp_path / "ev"),
+                 "--no-progress"]) == 0
+    assert sorted(p.name for p in (tmp_path / "ev").iterdir()) == ["dark_looming_duration0.5_size48.npy",
+                                                                  "light_looming_duration0.5_size48.npy"]
+
+
+def test_a_bad_video_is_one_error_line_and_the_batch_goes_on(tmp_path, capsys):
+    code = main(["events", str(tmp_path / "missing.mp4"), STIM, "--out", str(tmp_path / "ev"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert err.count("error:") == 1 and f"error: {tmp_path / 'missing.mp4'}: no such file" in err
+    assert len(list((tmp_path / "ev").iterdir())) == 1
+
+
+def test_one_output_file_for_two_inputs_is_a_usage_error(tmp_path, capsys):
+    assert main(["events", STIM, STIM, "--out", str(tmp_path / "x.npy")]) == 2
+    assert capsys.readouterr().err.startswith("error: --out")
+
+
+def test_info_reports_each_recording_and_names_the_byte_offset_of_a_truncated_one(tmp_path, capsys):
+    ev = random_events(300, (64, 48), seed=0)
+    good = tmp_path / "good.raw"
+    good.write_bytes(raw_header({"evt": "3.0", "geometry": "64x48"}) + encode_evt3(ev))
+    cut = tmp_path / "cut.raw"
+    cut.write_bytes(good.read_bytes()[:-1])
+    code = main(["events", "--info", str(cut), str(good)])
+    out, err = capsys.readouterr()
+    assert code == 1
+    assert f"{good}: evt3, 64x48 (header), {ev.size} events" in out
+    assert err.count("error:") == 1 and "byte offset" in err and str(cut) in err
+
+
+def test_info_warns_of_events_outside_the_given_sensor_size(tmp_path, capsys):
+    ev = random_events(300, (64, 48), seed=1)
+    f = tmp_path / "ev.npy"
+    np.save(f, ev)
+    assert main(["events", "--info", str(f), "--sensor-size", "32x48"]) == 0
+    err = capsys.readouterr().err
+    assert f"warning: {f}: " in err and "outside the 32x48 sensor" in err
+
+
+def test_running_a_model_on_an_event_file_names_the_file_and_the_way(tmp_path, capsys):
+    f = tmp_path / "ev.npy"
+    np.save(f, random_events(100, (64, 48), seed=2))
+    assert main([str(f), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("error:") == 1 and f"error: {f}: is an event-camera recording" in err
+
+
+def test_info_on_a_folder_reports_every_recording_in_it(tmp_path, capsys):
+    for i in range(2):
+        np.save(tmp_path / f"rec{i}.npy", random_events(50, (64, 48), seed=i))
+    np.save(tmp_path / "frames.npy", np.zeros((2, 4, 4), dtype=np.uint8))  # not a recording: skipped
+    assert main(["events", "--info", str(tmp_path), "--sensor-size", "64x48"]) == 0
+    out = capsys.readouterr().out
+    assert out.count(": npy, 64x48 (--sensor-size)") == 2 and "frames.npy" not in out

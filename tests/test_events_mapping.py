@@ -1,0 +1,51 @@
+"""The counts-to-contrast mapping on emulated events of the six basic stimuli.
+
+The basic stimuli are full-contrast (grey 0 and 1), so every pixel that changes between two
+frames changes by the whole range: the frames' ON/OFF split is ``P_on = [P]+``, ``P_off = [-P]+``
+with ``|P| = 1`` (255 grey levels for the LGMD family). The event input must give the same, from
+either emulator (cdnf_ti's, and an independent one with v2e's lin-log intensity and no
+interpolation) and for every sensor threshold from 0.1 to 0.3: the whole model family then sees
+on events what it sees on frames.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from other_emulator import other_emulate
+
+from cdnf_ti.events import EmulatorParams, bin_events, contrast_input, emulate
+from cdnf_ti.frames import iter_grey
+from cdnf_ti.inputs import resolve_input
+from cdnf_ti.stimuli.basic import BASIC_STIMULI
+
+SIZE = 64
+
+
+def frames_split(frames: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``([P]+, [-P]+)`` of each frame after the first, ``P = L(t) - L(t-1)``, L in [0, 1]."""
+    g = [np.asarray(f, dtype=np.float64) / (255.0 if f.dtype == np.uint8 else 1.0) for f in frames]
+    return [(np.maximum(b - a, 0.0), np.maximum(a - b, 0.0)) for a, b in zip(g[:-1], g[1:])]
+
+
+@pytest.fixture(scope="module", params=BASIC_STIMULI)
+def stimulus(request):
+    src = resolve_input(f"stim:{request.param}?size={SIZE}")
+    return src, list(iter_grey(src))
+
+
+@pytest.mark.parametrize("emulator", ["cdnf_ti", "lin-log"])
+@pytest.mark.parametrize("threshold", [0.1, 0.2, 0.3])
+def test_event_input_equals_the_frames_on_off_split(stimulus, emulator, threshold):
+    src, frames = stimulus
+    if emulator == "cdnf_ti":
+        events = list(emulate(frames, src.fps, EmulatorParams(threshold, threshold)))
+    else:
+        events = [other_emulate(frames, src.fps, threshold)]
+    bins = list(bin_events(events, (SIZE, SIZE), t0=0))  # the default bin: one 30 fps frame
+    want = frames_split(frames)
+    assert len(bins) <= len(want)
+    assert sum(int(b.sum()) for b in bins) > 0
+    for k, (on, off) in enumerate(want):  # bin k: the change from frame k to frame k + 1
+        p_on, p_off = contrast_input(bins[k], threshold) if k < len(bins) else (0 * on, 0 * off)
+        np.testing.assert_array_equal(p_on, on, err_msg=f"ON, bin {k}")
+        np.testing.assert_array_equal(p_off, off, err_msg=f"OFF, bin {k}")
