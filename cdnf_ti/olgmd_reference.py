@@ -10,7 +10,7 @@ computation, one frame at a time.
 
 ``variant="code"`` reproduces the authors' Python exactly (in float64 where
 they use float32), quirks included; ``variant="paper"`` corrects the quirks
-(see :data:`VARIANTS` and docs/MODELS_NEW.md for the list).
+(:class:`OLGMDReference` lists them).
 
 Per frame ``t`` (0-based, the ``t``-th frame read):
 
