@@ -144,6 +144,7 @@ class LPLC2Reference:
         self.v = self.params.v_rest
         self.lplc2 = np.zeros((self.height - 1, self.width - 1))
         self.arm_maps = np.zeros((4, self.height - 1, self.width - 1))
+        self.motion_maps = np.zeros((4, self.height - 1, self.width - 1))
 
     def luminance(self, frame: np.ndarray) -> np.ndarray:
         """Frame -> float64 luminance in [0, 1], shape (H, W); validates shape and values."""
@@ -216,7 +217,8 @@ class LPLC2Reference:
             self.lum_prev = lum
             self.t += 1
             return LPLC2Step(self.v, 0, False, 0, 0.0, 0.0, (0.0,) * 4, (self.v,) * p.substeps)
-        arm_maps = self.arms(self.motion(lum))
+        motion = self.motion(lum)
+        arm_maps = self.arms(motion)
         lplc2 = arm_maps.prod(axis=0)
         active = int(np.count_nonzero(lplc2 > 0))
         n1 = active / p.normal_count
@@ -235,7 +237,7 @@ class LPLC2Reference:
         self.v = v
         self.lum_prev = lum
         self.active_prev = active
-        self.lplc2, self.arm_maps = lplc2, arm_maps
+        self.lplc2, self.arm_maps, self.motion_maps = lplc2, arm_maps, motion
         self.t += 1
         core_arms = tuple(float(a) for a in arm_maps[:, max(cy, 0), max(cx, 0)])
         return LPLC2Step(float(v), spikes, spikes > 0, active, float(current), float(lplc2[max(cy, 0), max(cx, 0)]),

@@ -10,7 +10,8 @@ loop of their ``GF.m`` without the figures. Their stimuli are read from
 frames, exact) or the ``.avi`` renderings (``--source avi``), downsampled by
 ``--step`` as ``loom.m`` does (``patt(1:4:end, 1:4:end, :)``).
 
-Printed per stimulus: the largest per-frame difference of the LPLC2 response
+Printed per stimulus: the largest per-frame difference of the EMD motion maps
+(their ``LP``: left, right, up, down, relative to the frame's largest), of the LPLC2 response
 maps (absolute, and relative to the frame's largest response), of the centre
 unit, of the GF input current and of the GF membrane samples; the number of
 frames whose active-unit count differs; and whether the GF spike frames (the
@@ -53,13 +54,13 @@ dL = 0.050 / STEP; a_low(1, 1) = 1 / (dL + 1); a_low(1, 2) = 1 - a_low(1, 1);
 dH = 0.250 / STEP; b_high(1, 1) = dH / (dH + 1); b_high(1, 2) = b_high(1, 1);
 nx = size(patt, 1) - 1; ny = size(patt, 2) - 1;
 Fh_before = zeros(nx + 1, ny + 1); Fd_On_before = Fh_before; Fd_Off_before = Fh_before;
-maps = zeros(nx, ny, T - 1); nums = zeros(1, T - 1); core = zeros(1, T - 1);
+maps = zeros(nx, ny, T - 1); motion = zeros(nx, ny, 4, T - 1); nums = zeros(1, T - 1); core = zeros(1, T - 1);
 for i = 1:T-1
   [Fh, Fd_On, Fd_Off, He_On, Hi_On, Ve_On, Vi_On, He_Off, Hi_Off, Ve_Off, Vi_Off] = emd(nx, ny, a_low, b_high, ...
       Fh_before, Fd_On_before, Fd_Off_before, patt(:, :, i), patt(:, :, i + 1));
   LP = cat(3, Hi_On + Hi_Off, He_On + He_Off, Vi_On + Vi_Off, Ve_On + Ve_Off);
   L = lplc2conv2(LP);
-  maps(:, :, i) = L; nums(i) = numel(find(L > 0)); core(i) = L(floor(end / 2), floor(end / 2));
+  maps(:, :, i) = L; motion(:, :, :, i) = LP; nums(i) = numel(find(L > 0)); core(i) = L(floor(end / 2), floor(end / 2));
   Fh_before = Fh; Fd_On_before = Fd_On; Fd_Off_before = Fd_Off;
   printf('frame %d/%d\n', i, T - 1); fflush(stdout);
 end
@@ -77,7 +78,7 @@ for i = 1:T-1
     V0 = V;
   end
 end
-save('-mat7-binary', '{out}', 'nums', 'core', 'maps', 'I', 'v');
+save('-mat7-binary', '{out}', 'nums', 'core', 'maps', 'motion', 'I', 'v');
 """
 
 
@@ -104,7 +105,7 @@ def load_stimulus(repo: Path, name: str, source: str, step: int, first: int, fra
 
 
 def run_octave(octave: str, repo: Path, patt: np.ndarray, work: Path) -> dict:
-    """Run the driver on ``patt`` under Octave; returns nums, core, maps, I, v."""
+    """Run the driver on ``patt`` under Octave; returns nums, core, maps, motion (their LP), I, v."""
     stim, out, script = work / "stim.mat", work / "out.mat", work / "driver.m"
     sio.savemat(stim, {"patt": patt})
     script.write_text(DRIVER.format(code=(repo / CODE).as_posix(), stim=stim.as_posix(), out=out.as_posix()))
@@ -128,14 +129,18 @@ def compare(octave: str, repo: Path, patt: np.ndarray) -> dict:
         theirs = run_octave(octave, repo, patt, Path(tmp))
     h, w, t = patt.shape
     ref = LPLC2Reference(h, w, fps=1.0 / AUTHORS_DT)
-    map_abs = map_rel = core = current = 0.0
+    map_abs = map_rel = motion_rel = core = current = 0.0
     count_diff = 0
     ours_trace, spikes_o = [], []
     maps_t = theirs["maps"].reshape(h - 1, w - 1, t - 1)
+    motion_t = theirs["motion"].reshape(h - 1, w - 1, 4, t - 1)
     for k in range(t):
         s = ref.step(patt[:, :, k])
         if k == 0:
             continue
+        m_motion = motion_t[:, :, :, k - 1].transpose(2, 0, 1)  # their LP: left, right, up, down
+        motion_rel = max(motion_rel, float(np.max(np.abs(ref.motion_maps - m_motion)))
+                         / max(float(np.max(np.abs(m_motion))), 1e-300))
         m_t = maps_t[:, :, k - 1]
         d = float(np.max(np.abs(ref.lplc2 - m_t)))
         map_abs = max(map_abs, d)
@@ -149,7 +154,7 @@ def compare(octave: str, repo: Path, patt: np.ndarray) -> dict:
     spikes_t = (v_t.reshape(t - 1, -1) == 20.0).any(axis=1)
     first_t = int(np.argmax(spikes_t)) + 1 if spikes_t.any() else None
     first_o = int(np.argmax(spikes_o)) + 1 if any(spikes_o) else None
-    return {"map_abs": map_abs, "map_rel": map_rel, "core": core, "current": current,
+    return {"motion_rel": motion_rel, "map_abs": map_abs, "map_rel": map_rel, "core": core, "current": current,
             "v": float(np.max(np.abs(np.array(ours_trace) - v_t))), "count_diff": count_diff,
             "active_max": int(theirs["nums"].max()), "spike_frames": int(spikes_t.sum()),
             "spikes_equal": bool(np.array_equal(spikes_t, np.array(spikes_o))), "first": (first_t, first_o)}
@@ -169,14 +174,15 @@ def main(argv=None) -> int:
         sys.exit(f"error: {args.octave}: not found (install GNU Octave)")
     if not (args.repo / CODE / "emd.m").is_file():
         sys.exit(f"error: {args.repo / CODE}: emd.m not found (pass --repo, a checkout of EMD-LPLC2-GF-model)")
-    print(f"{'stimulus':28s} {'size':>8s} {'T':>4s} {'max|dMap|':>9s} {'rel':>9s} {'max|dCore|':>10s} "
+    print(f"{'stimulus':28s} {'size':>8s} {'T':>4s} {'rel dEMD':>9s} {'max|dMap|':>9s} {'rel':>9s} {'max|dCore|':>10s} "
           f"{'max|dI|':>9s} {'max|dV|mV':>9s} {'#active!=':>9s} {'max act':>7s} {'spk frames':>10s} spikes equal"
           " (first spike frame theirs/ours)")
     for name in args.stimuli:
         patt = load_stimulus(args.repo, name, args.source, args.step, args.first, args.frames)
         r = compare(args.octave, args.repo, patt)
         h, w, t = patt.shape
-        print(f"{name:28s} {f'{w}x{h}':>8s} {t:4d} {r['map_abs']:9.2e} {r['map_rel']:9.2e} {r['core']:10.2e} "
+        print(f"{name:28s} {f'{w}x{h}':>8s} {t:4d} {r['motion_rel']:9.2e} {r['map_abs']:9.2e} {r['map_rel']:9.2e} "
+              f"{r['core']:10.2e} "
               f"{r['current']:9.2e} {r['v']:9.2e} {r['count_diff']:9d} {r['active_max']:7d} {r['spike_frames']:10d} "
               f"{'yes' if r['spikes_equal'] else 'NO'} ({r['first'][0]}/{r['first'][1]})", flush=True)
     return 0
