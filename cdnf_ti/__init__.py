@@ -25,6 +25,7 @@ if not _os.path.isdir(_os.path.join(_here, "kernels")) and _os.path.isfile(
     __path__.append(_root)  # type: ignore[name-defined]  # noqa: F821
 
 from ._version import __version__
+from .backends import ENGINE as _ENGINE
 from .errors import InputError
 from .frames import FrameSource, iter_grey, open_source, to_grey
 from .models import (
@@ -46,6 +47,8 @@ from .models import (
     register_model,
 )
 from .params import CDNFParams
+
+Model.engine = _ENGINE  # the models' compiled backends come from the engine (cdnf_ti.backends)
 
 __all__ = ["CDNF", "CDNFParams", "LGMD2", "LGMD2Params", "LGMD1", "LGMD1Params", "SDNF", "SDNFParams",
            "FLGMDONn", "FLGMDParams", "Model", "StepResult", "Trace", "MODELS", "create_model",

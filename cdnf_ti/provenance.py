@@ -25,7 +25,8 @@ from .taichi_runtime import LANES_ENV, default_compiler  # the compiler layer's 
 
 #: Packages whose source files make up cdnf_ti (``kernels/``, ``stimuli/`` and ``bench/`` are
 #: installed under ``cdnf_ti``; listed so that an editable install, where they live beside it, counts them).
-_PACKAGES = ("cdnf_ti", "cdnf_ti.models", "cdnf_ti.kernels", "cdnf_ti.stimuli", "cdnf_ti.experiments")
+_PACKAGES = ("cdnf_ti", "cdnf_ti.models", "cdnf_ti.backends", "cdnf_ti.kernels", "cdnf_ti.stimuli",
+             "cdnf_ti.experiments", "cdnf_ti.events")
 
 
 def _package_folders() -> list[Path]:

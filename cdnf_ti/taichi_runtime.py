@@ -5,14 +5,16 @@ cdnf_ti's kernels are written in the Taichi DSL and compile under either
 * ``taichi`` 1.7 (upstream; LLVM 15; wheels up to Python 3.12), the default where it is
   installed: with the lane kernels compiled with explicit vector types (:func:`vector_kernel`)
   it runs C-DNF about as fast as quadrants at 426x240 and faster at 600x600 on the project's
-  Zen 5 machines, and starts 3 s sooner (``docs/PERFORMANCE.md``, round 14), or
+  Zen 5 machines, and starts 3 s sooner (``docs/PERFORMANCE.md``), or
 * ``quadrants`` (``import quadrants as qd``; the maintained fork, LLVM 22, wheels for
   Python 3.10-3.13+), the default where taichi has no wheel (Python 3.13).
 
-Both expose the same DSL (``ti.kernel``, ``ti.func``, ``ti.field``...). Kernel modules get the
-DSL module of the process's compiler from :func:`dsl`, so one statement of each kernel serves
-both. A process runs one compiler on one architecture (like Taichi itself, which allows one
-runtime per process): :func:`ensure_taichi` initialises it on first use; asking for another
+Both expose the same DSL (``ti.kernel``, ``ti.func``, ``ti.field``...). Kernel modules define
+their kernels in a factory, ``build(ti, lanes)``, that :func:`kernels` calls with the DSL module
+of the process's compiler (:func:`dsl`) once the compiler and arch are chosen, so one statement
+of each kernel serves both and importing a kernel module loads no compiler. A process runs
+one compiler on one architecture (like Taichi itself, which allows one runtime per process):
+:func:`ensure_taichi` initialises it on first use; asking for another
 compiler or arch later is an error. The compiler is chosen, in this order, by the
 ``compiler=`` argument of the first model (or ``--compiler`` on the command line), the
 ``CDNF_TI_COMPILER`` environment variable, or the fastest one installed.
@@ -357,11 +359,41 @@ def dsl() -> ModuleType:
     """The DSL module (``taichi`` or ``quadrants``) of this process's runtime.
 
     Starts the runtime with the defaults (``cpu``, :func:`default_compiler`) if needed.
-    Kernel modules do ``ti = dsl()`` instead of ``import taichi as ti``.
+    :func:`kernels` hands it to the kernel modules' ``build(ti, lanes)``.
     """
     if _module is None:
         ensure_taichi(_arch or "cpu")
     return _module  # type: ignore[return-value]
+
+
+_build_lock = threading.RLock()
+_built: dict[str, object] = {}
+
+
+def lanes() -> int:
+    """Lanes per vector element of the fast path under this process's compiler (starts the runtime if needed;
+    :func:`cdnf_ti.kernels.common.lane_count`)."""
+    from .kernels.common import lane_count
+
+    dsl()
+    return lane_count(_compiler)  # type: ignore[arg-type]
+
+
+def kernels(name: str):
+    """The kernels of ``kernels/<name>.py`` (``"cdnf"``, ``"lgmd"``, ``"sdnf"``, ``"stimuli"``, ``"common"``),
+    built for this process's compiler and lane count on first use (the module's ``build(ti, lanes)``).
+
+    The kernel modules define their kernels in that factory, so importing them loads no compiler; this
+    is the one place that builds them, once per process (a second model compiles nothing new).
+    Starts the runtime with the defaults if it has not started (:func:`dsl`).
+    """
+    with _build_lock:
+        got = _built.get(name)
+        if got is None:
+            ti = dsl()
+            module = importlib.import_module(f"{__package__}.kernels.{name}")
+            got = _built[name] = module.build(ti, lanes())
+        return got
 
 
 def current_arch() -> str | None:
@@ -388,45 +420,57 @@ def cpu_threads() -> int:
 # Both compilers normally scalarise ``ti.Vector`` values (``real_matrix_scalarize``, on by
 # default) and leave it to LLVM's vectorisers to put them back together: taichi 1.7.4 does so
 # 128 bits wide on the Zen 5 host (its LLVM 15 does not know the CPU), quadrants 1.3.3 not at
-# all (its pipeline leaves the SLP vectoriser off; docs/PERFORMANCE.md, round 8). Compiled with
-# the option off, a vector stays an LLVM vector type, which the code generator, which does see
-# the host's AVX-512, lowers to full-width registers: C-DNF's lane solves ran 1.8x (taichi) and
-# 2.9-3.7x (quadrants) faster per update (round 14). The option is part of the runtime's compile
-# configuration, read while a kernel compiles (and part of the compile cache's key), so
-# :func:`vector_kernel` turns it off around the compilation of the kernels made for it only.
+# all (its pipeline leaves the SLP vectoriser off). Compiled with the option off, a vector stays
+# an LLVM vector type, which the code generator, which does see the host's AVX-512, lowers to
+# full-width registers: C-DNF's lane solves ran 1.8x (taichi) and 2.9-3.7x (quadrants) faster
+# per update (docs/ENGINE_NOTES.md). The option is part of the runtime's compile configuration,
+# read while a kernel compiles (and part of the compile cache's key). Every kernel of cdnf_ti
+# compiles through :func:`vector_kernel` or :func:`scalar_kernel`, which set the option the
+# kernel needs under one lock and put back the value they found, so two threads compiling
+# kernels of either kind at once never see each other's setting.
 
-_vector_compile_lock = threading.Lock()
+_compile_lock = threading.RLock()
 
 
 def vector_kernel(kernel):
     """Compile the ``@ti.kernel`` ``kernel`` with explicit vector types (``real_matrix_scalarize`` off).
 
-    Returns a function that launches ``kernel`` with the same arguments. The first launch
-    with a new compile signature (the values of its ``ti.template()`` arguments, the type,
-    dtype and ndim of the array arguments whose annotation leaves those open: what makes the
-    compiler build another instance)
-    runs with the option off, under a lock, and restores it: that launch compiles the
-    instance. Every other launch is a plain call, the option untouched. So only these
-    kernels compile in that mode; the option is off only while one of their instances is
-    compiled and first run (at a model's warm-up), when a kernel of another model compiled
-    at the same moment by another Python thread would compile in that mode too.
-
+    Returns a function that launches ``kernel`` with the same arguments (:func:`compiled_as`).
     The kernel may hold only constructs that both compilers handle on unscalarised vectors:
     no ``Vector.field`` access (use vector ``ndarray`` arguments), no unary minus or
-    ``ti.abs`` on a vector (``0.0 - x``, :func:`cdnf_ti.kernels.common.lane_abs`) and no
-    ``.any()``/``.all()``, which taichi 1.7.4 gets wrong in this mode
-    (:func:`cdnf_ti.kernels.common.any_lane`); coefficients passed down as tuples of scalars
-    rather than small ``ti.Vector``s (a launch of quadrants 1.3.3 crashed on those,
-    ``kernels/lgmd.py``).
+    ``ti.abs`` on a vector and no ``.any()``/``.all()`` (the helpers of
+    :mod:`cdnf_ti.kernels.compat` stand in for them).
+    """
+    return compiled_as(kernel, scalarize=False)
+
+
+def scalar_kernel(kernel):
+    """Compile the ``@ti.kernel`` ``kernel`` the usual way (``real_matrix_scalarize`` on), whatever
+    another thread's :func:`vector_kernel` is compiling at the same moment (:func:`compiled_as`)."""
+    return compiled_as(kernel, scalarize=True)
+
+
+def compiled_as(kernel, scalarize: bool):
+    """A launcher of ``kernel`` that compiles each new instance with ``real_matrix_scalarize = scalarize``.
+
+    The first launch with a new compile signature (the values of its ``ti.template()``
+    arguments, the type, dtype and ndim of the array arguments whose annotation leaves those
+    open: what makes the compiler build another instance) runs under the process's compile
+    lock with the option set as asked, then puts back the value it found: both compilers build
+    an instance's code during its first launch (the AST in ``materialize``, the machine code in
+    ``launch_kernel``). Every other launch is a plain call.
 
     Parameters
     ----------
     kernel : a ``@ti.kernel`` function of the running compiler (:func:`dsl`)
+    scalarize : bool
+        The option's value while the kernel compiles.
 
     Returns
     -------
     callable
-        ``launch(*args)``, positional arguments as for ``kernel``.
+        ``launch(*args)``, positional arguments as for ``kernel``; ``launch.kernel`` is the
+        kernel, ``launch.scalarize`` the mode.
     """
     import functools
     import inspect
@@ -451,18 +495,18 @@ def vector_kernel(kernel):
         sig = signature(args)
         if sig in compiled:
             return kernel(*args)
-        # a new instance: both compilers build its code on its first launch (the AST in
-        # ``materialize``, the machine code in ``launch_kernel``), so the option stays off
-        # for that whole launch; later launches reuse the code.
-        with _vector_compile_lock:
+        with _compile_lock:
             cfg = ti.lang.impl.current_cfg()
-            cfg.real_matrix_scalarize = False
+            before = cfg.real_matrix_scalarize
+            cfg.real_matrix_scalarize = scalarize
             try:
                 out = kernel(*args)
             finally:
-                cfg.real_matrix_scalarize = True
+                cfg.real_matrix_scalarize = before
             compiled.add(sig)
         return out
 
     launch.kernel = kernel  # the kernel itself
+    launch.scalarize = scalarize
+    launch.instances = lambda: len(compiled)  # compiled instances so far
     return launch

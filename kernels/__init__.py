@@ -1,4 +1,6 @@
-"""Taichi kernels (installed as ``cdnf_ti.kernels``): the per-pixel work of every model.
+"""The engine's kernels (installed as ``cdnf_ti.kernels``): the per-pixel work of every model.
 
-Import these modules only after :func:`cdnf_ti.taichi_runtime.ensure_taichi`.
+Each module defines its kernels in a factory, ``build(ti, lanes)``, so importing it loads no
+compiler; :func:`cdnf_ti.taichi_runtime.kernels` builds them once the compiler and arch are
+chosen. See ``docs/ARCHITECTURE.md``.
 """

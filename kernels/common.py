@@ -1,14 +1,15 @@
 """Shared Taichi helpers: border handling, rational tanh, work partitioning, launch records."""
 
+
+import collections
+import functools
+from types import SimpleNamespace
 from typing import Sequence
 
 import numpy as np
 
-from ..taichi_runtime import current_compiler, dsl, lanes_override
-
-ti = dsl()  # taichi or quadrants: the same DSL
-
-F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
+from ..taichi_runtime import lanes_override, scalar_kernel
+from . import compat
 
 REPLICATE, REFLECT, ZERO = 0, 1, 2
 BORDER_CODES = {"replicate": REPLICATE, "reflect": REFLECT, "zero": ZERO}
@@ -38,76 +39,6 @@ def column_blocks(width: int, arch: str) -> int:
     return COLUMN_BLOCKS if arch == "cpu" else max(1, -(-int(width) // CHUNK))
 
 
-@ti.func
-def tanh_rational(x):
-    """tanh via the [13/6] rational approximation (Eigen/XLA), |err| < 4e-7 in f32."""
-    xc = ti.min(ti.max(x, -7.90531110763549805), 7.90531110763549805)
-    x2 = xc * xc
-    p = x2 * -2.76076847742355e-16 + 2.00018790482477e-13
-    p = x2 * p + -8.60467152213735e-11
-    p = x2 * p + 5.12229709037114e-08
-    p = x2 * p + 1.48572235717979e-05
-    p = x2 * p + 6.37261928875436e-04
-    p = x2 * p + 4.89352455891786e-03
-    p = xc * p
-    q = x2 * 1.19825839466702e-06 + 1.18534705686654e-04
-    q = x2 * q + 2.26843463243900e-03
-    q = x2 * q + 4.89352518554385e-03
-    return p / q
-
-
-@ti.func
-def start_coefficients(start: ti.template(), r):
-    """Row ``r`` of a local-start array (float32 ndarray, shape (2, 7), from
-    :func:`cdnf_ti.solver.cdnf_local_starts`) as a vector, read once per row of work."""
-    return ti.Vector([start[r, 0], start[r, 1], start[r, 2], start[r, 3], start[r, 4], start[r, 5],
-                      start[r, 6]], dt=ti.f32)
-
-
-@ti.func
-def local_start(x, c):
-    """The stationary level of a uniform input ``x`` (scalar or lane vector), as fitted by
-    :func:`cdnf_ti.solver.local_start_coefficients` (``c``: :func:`start_coefficients`):
-    ``g0 + x q(t)``, ``x`` clipped to ``[0, x_max]``, ``t = 2 x / x_max - 1``, ``q`` cubic."""
-    xc = ti.min(ti.max(x, 0.0), c[1])
-    t = xc * c[2] - 1.0
-    return c[0] + xc * (c[3] + t * (c[4] + t * (c[5] + t * c[6])))
-
-
-@ti.func
-def border_index(i, n, mode: ti.template()):
-    """Map a possibly out-of-range index into [0, n) for the border mode."""
-    r = i
-    if ti.static(mode == REFLECT):
-        r = ti.abs(i)
-        if r >= n:
-            r = 2 * n - 2 - r
-        r = ti.min(ti.max(r, 0), n - 1)
-    else:
-        r = ti.min(ti.max(i, 0), n - 1)
-    return r
-
-
-@ti.func
-def border_weight(i, n, mode: ti.template()):
-    """1 inside the frame; 0 outside it for the ``zero`` border, else 1."""
-    w = 1.0
-    if ti.static(mode == ZERO):
-        w = ti.select((i >= 0) & (i < n), 1.0, 0.0)
-    return w
-
-
-@ti.func
-def block_span(k, width, blocks):
-    """Row and column range [j0, j1) of work item ``k`` (row-major items)."""
-    i = k // blocks
-    b = k % blocks
-    bw = ((width + blocks - 1) // blocks + CHUNK - 1) // CHUNK * CHUNK  # whole runs (row_runs)
-    j0 = ti.min(b * bw, width)
-    j1 = ti.min(j0 + bw, width)
-    return i, j0, j1
-
-
 # -- row runs -----------------------------------------------------------------------
 # taichi 1.7 does not loop-vectorise ndarray loops (see kernels/cdnf.py), but it does
 # SLP-vectorise straight-line code. A row kernel therefore visits its columns in runs:
@@ -118,179 +49,6 @@ def block_span(k, width, blocks):
 
 CHUNK = 16
 QUARTER = 4  # the shorter runs that finish a segment
-
-
-@ti.func
-def run_load(x: ti.template(), i, j, n: ti.template()):
-    """``x[i, j .. j + n - 1]`` as a float32 vector of n values."""
-    v = ti.Vector([0.0] * n, dt=ti.f32)
-    for c in ti.static(range(n)):
-        v[c] = ti.cast(x[i, j + c], ti.f32)
-    return v
-
-
-@ti.func
-def run_store(x: ti.template(), i, j, v, n: ti.template()):
-    """``x[i, j .. j + n - 1] = v``."""
-    for c in ti.static(range(n)):
-        x[i, j + c] = v[c]
-
-
-@ti.func
-def luminance_change(frame: ti.template(), L: ti.template(), P: ti.template(), i, j, n: ti.template(), scale, keep,
-                     grey_levels: ti.template()):
-    """Photoreceptors on the run ``(i, j .. j + n - 1)``: ``g = frame * scale`` (rounded to
-    integer grey levels when ``grey_levels``), ``P = keep (g - L)`` (``keep = 0`` on the
-    first frame), ``L = g``. Returns ``P``."""
-    g = run_load(frame, i, j, n) * scale
-    if ti.static(grey_levels):
-        g = ti.floor(g + 0.5)
-    p = keep * (g - run_load(L, i, j, n))
-    run_store(L, i, j, g, n)
-    run_store(P, i, j, p, n)
-    return p
-
-
-@ti.func
-def run_sum(v, n: ti.template()):
-    """Sum of the n values of ``v``, accumulated in float64."""
-    s = ti.f64(0.0)
-    for c in ti.static(range(n)):
-        s += ti.cast(v[c], ti.f64)
-    return s
-
-
-@ti.func
-def run_max(v, n: ti.template()):
-    """Largest of the first ``n`` values of ``v`` (float32; a run, or a lane vector with ``n = LANES``).
-
-    A tree of pairwise maxima: a chain ``max(max(v0, v1), v2)...`` has ``n - 1`` dependent
-    steps, which the vectoriser leaves scalar; halving ``log2(n)`` times gives the same value
-    (a maximum does not depend on the order) in vector instructions. It runs once per element
-    in the solves' update loops, where the tree made a full-frame ON/OFF update 11 % and a
-    Summation update 23 % faster at 32 lanes (docs/PERFORMANCE.md, round 13).
-    """
-    b = v  # a copy: ti.func arguments are passed by value
-    for width in ti.static(_halvings(n)):
-        for c in ti.static(range(width // 2)):
-            b[c] = ti.max(b[c], b[c + width - width // 2])
-    return b[0]
-
-
-def _halvings(n: int) -> list[int]:
-    """Widths of the reduction tree of :func:`run_max`: ``n``, then ``n - n // 2``, ... down to 2."""
-    widths = []
-    while n > 1:
-        widths.append(n)
-        n -= n // 2
-    return widths
-
-
-@ti.func
-def _combine(acc, r, reduce: ti.template()):
-    """``acc + r`` (``reduce == "sum"``) or ``max(acc, r)``."""
-    out = acc + r
-    if ti.static(reduce == "max"):
-        out = ti.max(acc, r)
-    return out
-
-
-@ti.func
-def _single_columns(body: ti.template(), ctx: ti.template(), im, i, ip, j, stop, W, acc, reduce: ti.template()):
-    """Runs of one column ``j .. stop - 1`` (neighbour columns clamped); returns ``(acc, stop)``."""
-    while j < stop:
-        acc = _combine(acc, body(ctx, im, i, ip, ti.max(j - 1, 0), j, ti.min(j + 1, W - 1), 1), reduce)
-        j += 1
-    return acc, j
-
-
-@ti.func
-def row_runs(body: ti.template(), ctx: ti.template(), i, j0, j1, H, W, reduce: ti.template(),
-             halo: ti.template()):
-    """Call ``body(ctx, im, i, ip, jm, j, jp, n)`` over the columns ``[j0, j1)`` of row ``i``.
-
-    ``im``/``ip`` are the rows above and below, ``jm``/``jp`` the first columns of the
-    left and right neighbours of the run ``j .. j + n - 1`` (clamped: replicate border).
-    Runs of ``n = CHUNK`` (then ``QUARTER``) columns keep ``halo`` columns either side
-    inside the frame (``halo`` >= 1: the body's horizontal reach); every other column is
-    a run of one.
-    Returns the ``reduce`` (``"sum"``: float64 sum; ``"max"``) of body's returns.
-    """
-    im = ti.min(ti.max(i - 1, 0), H - 1)
-    ip = ti.min(ti.max(i + 1, 0), H - 1)
-    acc, j = _single_columns(body, ctx, im, i, ip, j0, ti.min(j1, halo), W, ti.f64(0.0), reduce)
-    end = ti.min(j1, W - halo)
-    for n in ti.static((CHUNK, QUARTER)):
-        while j + n <= end:
-            acc = _combine(acc, body(ctx, im, i, ip, j - 1, j, j + 1, n), reduce)
-            j += n
-    acc, j = _single_columns(body, ctx, im, i, ip, j, j1, W, acc, reduce)
-    return acc
-
-
-@ti.func
-def _dog_row_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
-    v, row1, row2, g1, g2 = ti.static(ctx[0], ctx[1], ctx[2], ctx[3], ctx[4])
-    mode, R = ti.static(ctx[5], ctx[6])
-    W = v.shape[1]
-    a1 = ti.Vector([0.0] * n, dt=ti.f32)
-    a2 = ti.Vector([0.0] * n, dt=ti.f32)
-    for d in ti.static(range(-R, R + 1)):
-        x = ti.Vector([0.0] * n, dt=ti.f32)
-        if ti.static(n == 1):  # a column near the border: map the tap into the frame
-            x[0] = border_weight(j + d, W, mode) * v[i, border_index(j + d, W, mode)]
-        else:  # a run with every tap inside the frame
-            x = run_load(v, i, j + d, n)
-        a1 += g1[d + R] * x
-        a2 += g2[d + R] * x
-    run_store(row1, i, j, a1, n)
-    run_store(row2, i, j, a2, n)
-    return 0.0
-
-
-@ti.func
-def dog_row_pass(v: ti.template(), row1: ti.template(), row2: ti.template(), g1: ti.template(),
-                 g2: ti.template(), blocks, mode: ti.template(), R: ti.template()):
-    """Horizontal passes of a separable DoG: ``row1 = g1 (*)_x v``, ``row2 = g2 (*)_x v``.
-
-    ``g1``/``g2`` are 1-D profiles of length ``2R + 1`` (``R`` a compile-time radius:
-    the taps unroll). Called at a kernel's top level, the loop is the kernel's
-    parallel loop over (row, column-block) items.
-    """
-    for k in range(v.shape[0] * blocks):
-        dog_row_item(v, row1, row2, g1, g2, k, blocks, mode, R)
-
-
-@ti.func
-def dog_row_item(v: ti.template(), row1: ti.template(), row2: ti.template(), g1: ti.template(),
-                 g2: ti.template(), k, blocks, mode: ti.template(), R: ti.template()):
-    """Work item ``k`` (a row's column block, :func:`block_span`) of :func:`dog_row_pass`."""
-    H, W = v.shape[0], v.shape[1]
-    i, j0, j1 = block_span(k, W, blocks)
-    row_runs(_dog_row_run, (v, row1, row2, g1, g2, mode, R), i, j0, j1, H, W, "sum", ti.static(max(R, 1)))
-
-
-@ti.func
-def dog_column_run(row1: ti.template(), row2: ti.template(), g1: ti.template(), g2: ti.template(),
-                   A, B, i, j, n: ti.template(), mode: ti.template(), R: ti.template()):
-    """Vertical pass on the run ``(i, j .. j + n - 1)``: ``A g1 (*)_y row1 - B g2 (*)_y row2`` = ``W_s (*) v``
-    (radius ``R``, unrolled; rows mapped by the border mode)."""
-    H = row1.shape[0]
-    b1 = ti.Vector([0.0] * n, dt=ti.f32)
-    b2 = ti.Vector([0.0] * n, dt=ti.f32)
-    for d in ti.static(range(-R, R + 1)):
-        ii = border_index(i + d, H, mode)
-        wgt = border_weight(i + d, H, mode)
-        b1 += (g1[d + R] * wgt) * run_load(row1, ii, j, n)
-        b2 += (g2[d + R] * wgt) * run_load(row2, ii, j, n)
-    return A * b1 - B * b2
-
-
-@ti.kernel
-def fill(x: F2, value: ti.f32):
-    """Set every element of ``x`` to ``value``."""
-    for i, j in x:
-        x[i, j] = value
 
 
 # ---------------------------------------------------------------------------
@@ -313,12 +71,12 @@ def fill(x: F2, value: ti.f32):
 # work on lane arrays (C-DNF's and the LGMD family's ``lanes_*``) compile with explicit
 # vector types (``taichi_runtime.vector_kernel``): a lane vector stays one LLVM vector,
 # which the code generator lowers to the host's widest registers, under both compilers
-# (docs/PERFORMANCE.md, round 14). The helpers below also serve the row runs of the
+# (docs/PERFORMANCE.md). The helpers below also serve the row runs of the
 # generic kernels, which compile the usual (scalarised) way.
 #
 # The lane count suits the compiler, and is 32 for both now: with explicit vector types
 # every lane model ran faster at 32 lanes than at 16 under quadrants on the Zen 5 host
-# (C-DNF 1.3-1.5x, LGMD1/LGMD2/F-LGMD 10-28 % at 426x240; docs/PERFORMANCE.md, round 14),
+# (C-DNF 1.3-1.5x, LGMD1/LGMD2/F-LGMD 10-28 % at 426x240; docs/PERFORMANCE.md),
 # and taichi's contrast update 1.6x faster; scalarised (rounds 7-13) quadrants had
 # preferred 16. $CDNF_TI_LANES overrides it, to measure and tune the layout on another CPU.
 # ---------------------------------------------------------------------------
@@ -339,145 +97,8 @@ def lane_count(compiler: str) -> int:
     return LANES_BY_COMPILER[compiler] if override is None else override
 
 
-LANES = lane_count(current_compiler())  # the runtime is running: ti = dsl() above
-
-
-def lane_layout(width: int) -> tuple[int, int]:
-    """``(E1, NB)``: last element holding a frame column, elements per row."""
-    e1 = (LANES + width - 1) // LANES
-    return e1, e1 + 2
-
-
-@ti.func
-def lane_shift(a, b, c, s: ti.template()):
-    """Lanes of ``b`` shifted by ``s`` columns (``a``/``c``: left/right neighbours)."""
-    out = ti.Vector([0.0] * LANES, dt=ti.f32)
-    for l in ti.static(range(LANES)):
-        if ti.static(l + s < 0):
-            out[l] = a[LANES + l + s]
-        elif ti.static(l + s >= LANES):
-            out[l] = c[l + s - LANES]
-        else:
-            out[l] = b[l + s]
-    return out
-
-
-#: A lane array argument of an explicit-vector kernel (:func:`~cdnf_ti.taichi_runtime.vector_kernel`):
-#: a vector ndarray of ``LANES`` float32 per element, shape (H, NB) or, with its two ping-pong
-#: buffers first, (2, H, NB).
-LANE2 = ti.types.ndarray(dtype=ti.types.vector(LANES, ti.f32), ndim=2)
-LANE3 = ti.types.ndarray(dtype=ti.types.vector(LANES, ti.f32), ndim=3)
-
-
-def lane_array(*lead: int, H: int, NB: int):
-    """A lane array for explicit-vector kernels: ``LANES`` float32 per element, shape
-    ``(*lead, H, NB)`` (``lead``: ``2`` for a field's two ping-pong buffers)."""
-    return ti.ndarray(ti.types.vector(LANES, ti.f32), (*lead, H, NB))
-
-
-@ti.func
-def any_lane(mask):
-    """Whether any lane of the comparison ``mask`` (a lane vector of booleans) is set.
-
-    Not ``mask.any()``: in a kernel compiled with explicit vector types, taichi 1.7.4's
-    ``any()`` tests only some of the lanes (found in round 14; a test checks this helper).
-    """
-    return run_max(ti.select(mask, 1, 0), LANES) != 0
-
-
-@ti.func
-def lane_abs(x):
-    """``|x|`` of a lane vector (``ti.abs`` and unary minus on vectors abort taichi 1.7.4's
-    compiler with explicit vector types)."""
-    return ti.max(x, 0.0 - x)
-
-
-@ti.func
-def lane_mask(e, W: ti.template()):
-    """1.0 on the lanes of element ``e`` that hold frame columns, else 0.0 (only the last one has any)."""
-    m = ti.Vector([1.0] * LANES, dt=ti.f32)
-    if e == ti.static((LANES + W - 1) // LANES):
-        for l in ti.static(range(LANES)):
-            if ti.static((W - 1) // LANES * LANES + l >= W):
-                m[l] = 0.0
-    return m
-
-
-@ti.func
-def lane_get(x: ti.template(), p, i, e):
-    """Element ``(i, e)`` of buffer ``p`` of a lane field: ``x[p, i, e]``, or ``x[i, e]`` for a field of one buffer."""
-    if ti.static(len(x.shape) == 3):
-        return x[p, i, e]
-    else:
-        return x[i, e]
-
-
-@ti.func
-def _lane_put(x: ti.template(), p, i, e, lane: ti.template(), val):
-    """Set one lane of element ``(i, e)`` of buffer ``p`` (see :func:`lane_get`)."""
-    if ti.static(len(x.shape) == 3):
-        x[p, i, e][lane] = val
-    else:
-        x[i, e][lane] = val
-
-
-@ti.func
-def fill_ghosts(x: ti.template(), p, i, left: ti.i32, right: ti.i32, W: ti.template(), R: ti.template(),
-                mode: ti.template()):
-    """Write the R ghost columns left of column 0 / right of column W-1 of row ``i`` of buffer ``p``
-    (``p`` is ignored for a field of one buffer, see :func:`lane_get`)."""
-    if left:
-        for d in ti.static(range(1, R + 1)):
-            g = LANES - d  # flat position of column -d
-            val = ti.f32(0.0)
-            if ti.static(mode == REFLECT):
-                val = lane_get(x, p, i, (LANES + d) // LANES)[(LANES + d) % LANES]
-            elif ti.static(mode == REPLICATE):
-                val = lane_get(x, p, i, 1)[0]
-            _lane_put(x, p, i, g // LANES, g % LANES, val)
-    if right:
-        for d in ti.static(range(1, R + 1)):
-            g = LANES + W - 1 + d
-            val = ti.f32(0.0)
-            if ti.static(mode == REFLECT):
-                s = LANES + W - 1 - d
-                val = lane_get(x, p, i, s // LANES)[s % LANES]
-            elif ti.static(mode == REPLICATE):
-                s = LANES + W - 1
-                val = lane_get(x, p, i, s // LANES)[s % LANES]
-            _lane_put(x, p, i, g // LANES, g % LANES, val)
-
-
-@ti.func
-def lane_edge_diag(x: ti.template(), p, im, i, ip, e):
-    """``(centre, edge sum, diagonal sum)`` of the 3x3 windows of the LANES columns of element
-    ``(i, e)`` of buffer ``p`` (``im``/``ip``: the rows above and below; ghosts give the border)."""
-    c = lane_get(x, p, i, e)
-    v = lane_get(x, p, im, e) + lane_get(x, p, ip, e)
-    c_lo, c_hi = lane_neighbours(lane_get(x, p, i, e - 1)[LANES - 1], c, lane_get(x, p, i, e + 1)[0])
-    v_lo, v_hi = lane_neighbours(lane_get(x, p, im, e - 1)[LANES - 1] + lane_get(x, p, ip, e - 1)[LANES - 1], v,
-                                 lane_get(x, p, im, e + 1)[0] + lane_get(x, p, ip, e + 1)[0])
-    return c, v + c_lo + c_hi, v_lo + v_hi
-
-
-@ti.func
-def lane_neighbours(left, b, right):
-    """``(b shifted right by one column, b shifted left by one column)``.
-
-    ``left`` is the column before lane 0 and ``right`` the column after the last lane.
-    """
-    lo = ti.Vector([0.0] * LANES, dt=ti.f32)
-    hi = ti.Vector([0.0] * LANES, dt=ti.f32)
-    lo[0] = left
-    hi[LANES - 1] = right
-    for l in ti.static(range(1, LANES)):
-        lo[l] = b[l - 1]
-        hi[l - 1] = b[l]
-    return lo, hi
-
-
 MAX_STEPS = 32  # updates per launch of the solve kernels (steps_per_launch <= 32): the plain scheme's ~25
-# Summation updates of a frame fit one launch, one late-waking pool thread less per frame (round 14)
+# Summation updates of a frame fit one launch, one late-waking pool thread less per frame
 
 # -- launch records --------------------------------------------------------------------
 # A solve kernel runs up to MAX_STEPS updates of a fixed point in one launch. Its
@@ -485,7 +106,7 @@ MAX_STEPS = 32  # updates per launch of the solve kernels (steps_per_launch <= 3
 # kernel argument), not through a return value: returning a vector costs ~210 us per
 # launch on the CPU under taichi 1.7.4 (a NumPy argument ~12 us, zero-copy), and ~1 ms
 # on a GPU, where a NumPy argument costs ~0.05-0.15 ms (copied in and out around the
-# launch; docs/PERFORMANCE.md, round 9).
+# launch; docs/PERFORMANCE.md).
 
 RECORD_COEFS = 2  # columns 0, 1 of a launch record: lam, mom
 
@@ -526,145 +147,424 @@ class LaunchRecord:
         return out
 
 
-@ti.func
-def record_residuals(rbuf: ti.template(), record: ti.template(), fields: ti.template()):
-    """Copy the residuals of a launch (``rbuf[j, f]``, -1: not run) into its record (serial tail)."""
-    for j in ti.static(range(MAX_STEPS)):
-        for f in ti.static(range(fields)):
-            record[j, RECORD_COEFS + f] = rbuf[j, f]
 
 
-@ti.func
-def launch_gate(record: ti.template(), j: ti.template(), n, tol, grow, fields: ti.template()):
-    """Whether update ``j`` (compile-time) of a launch of ``n`` runs, from the residuals of the
-    updates before it in ``record`` (:class:`LaunchRecord`): 1 if ``j < n`` and none of them
-    converged (every residual ``<= tol``), grew (:func:`go_on`) or was not run, else 0.
+def layout(width: int, lanes: int) -> tuple[int, int]:
+    """``(E1, NB)`` of a lane array for frames ``width`` px wide: last element holding a frame
+    column, elements per row (``lanes`` columns per element, a ghost element either side)."""
+    e1 = (lanes + width - 1) // lanes
+    return e1, e1 + 2
 
-    Generic solve kernels (one parallel loop per update) call it in every work item; the
-    record's earlier rows are final by then (the loops of a launch run one after another).
+
+def context(name: str, fields: str):
+    """A named tuple type for a kernel's context: its arguments, read by name in the stages
+    (``ctx.u_on``), never by position. Build one in a kernel as ``ti.static(Ctx(...))``."""
+    return collections.namedtuple(name, fields)
+
+
+def namespace(module_globals: dict, local_vars: dict) -> SimpleNamespace:
+    """The names a kernel module's ``build`` returns: its module-level constants and helpers
+    (``module_globals``, dunders left out) and the kernels it defined (``local_vars``).
+
+    Each plain ``@ti.kernel`` among them is wrapped by :func:`~cdnf_ti.taichi_runtime.scalar_kernel`
+    (those made with ``vector_kernel`` already are), so every kernel of the engine compiles
+    in the mode it needs whatever other threads compile at the same time.
     """
-    go = ti.select(j < n, 1, 0)
-    best = ti.f32(3.0e38)
-    for k in ti.static(range(j)):
-        r = record[k, RECORD_COEFS]
-        for f in ti.static(range(1, fields)):
-            r = ti.max(r, record[k, RECORD_COEFS + f])
-        g, best = go_on(r, best, tol, grow)
-        go = go & g
-    return go
+    names = {k: v for k, v in module_globals.items() if not k.startswith("__") and k != "build"}
+    for k, v in local_vars.items():
+        if getattr(v, "_is_wrapped_kernel", False) and not hasattr(v, "scalarize"):
+            v = scalar_kernel(v)
+        names[k] = v
+    return SimpleNamespace(**names)
 
 
-# -- persistent workers ------------------------------------------------------------
-# taichi launches a parallel loop through a thread pool whose hand-off costs ~50 us
-# per loop on these machines, and a second pool thread often starts hundreds of us
-# after the first. A solve kernel therefore runs ONE parallel loop of ``nw``
-# persistent workers (one per pool thread) for all its updates: the workers claim
-# chunks of rows of each phase (an update, or a pass of one) from atomic counters and
-# wait for the previous phase to finish before they start the next one. The rows are
-# cut into ``nw`` bands; a worker takes chunks of its own band first (its rows stay in
-# its core's cache from update to update), then helps with the others, so a worker
-# that starts late costs nothing. Rows of a phase are claimed only after every row of
-# the phase before, and a claimed row is worked on by a running worker, so the waits
-# always end: with one pool thread the first worker simply does everything. A CPU pool
-# thread takes a chunk of at least WORKER_STRIDE consecutive loop indices, so the
-# workers sit WORKER_STRIDE indices apart.
+@functools.lru_cache(maxsize=None)
+def build(ti, lanes: int) -> SimpleNamespace:
+    """The kernels of this module for the DSL module ``ti`` (taichi or quadrants) and ``lanes``
+    lanes per vector element of the fast path: a namespace of every name below (and the
+    module-level constants). Built once per (compiler, lanes), after the runtime started."""
+    LANES = lanes
+    X = compat.build(ti, lanes)  # the compilers' workarounds
+    any_lane, lane_abs, run_max = X.any_lane, X.lane_abs, X.run_max
 
-WORKER_STRIDE = 512
-MAX_WORKERS = 32
-SYNC_STRIDE = 16  # i32 slots between two counters: one 64-byte cache line each
-ROWS_PER_CLAIM = 2
-MAX_PHASES = 2 * MAX_STEPS + 2  # the updates' phases, one that runs after them, one before
-LAST_PHASE = 2 * MAX_STEPS
-LOAD_PHASE = 2 * MAX_STEPS + 1
+    F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 
 
-def sync_size() -> int:
-    """Length of the counter field a solve kernel needs."""
-    return MAX_PHASES * (MAX_WORKERS + 1) * SYNC_STRIDE
+    @ti.func
+    def tanh_rational(x):
+        """tanh via the [13/6] rational approximation (Eigen/XLA), |err| < 4e-7 in f32."""
+        xc = ti.min(ti.max(x, -7.90531110763549805), 7.90531110763549805)
+        x2 = xc * xc
+        p = x2 * -2.76076847742355e-16 + 2.00018790482477e-13
+        p = x2 * p + -8.60467152213735e-11
+        p = x2 * p + 5.12229709037114e-08
+        p = x2 * p + 1.48572235717979e-05
+        p = x2 * p + 6.37261928875436e-04
+        p = x2 * p + 4.89352455891786e-03
+        p = xc * p
+        q = x2 * 1.19825839466702e-06 + 1.18534705686654e-04
+        q = x2 * q + 2.26843463243900e-03
+        q = x2 * q + 4.89352518554385e-03
+        return p / q
 
 
-@ti.func
-def _slot(phase, k):
-    """Counter ``k`` of ``phase``: the claim counter of band ``k < MAX_WORKERS``, else the done counter."""
-    return (phase * (MAX_WORKERS + 1) + k) * SYNC_STRIDE
+    @ti.func
+    def start_coefficients(start: ti.template(), r):
+        """Row ``r`` of a local-start array (float32 ndarray, shape (2, 7), from
+        :func:`cdnf_ti.solver.cdnf_local_starts`) as a vector, read once per row of work."""
+        return ti.Vector([start[r, 0], start[r, 1], start[r, 2], start[r, 3], start[r, 4], start[r, 5],
+                          start[r, 6]], dt=ti.f32)
 
 
-@ti.func
-def reset_sync(sync: ti.template(), rbuf: ti.template(), nw):
-    """Zero the phase counters, mark every update not run (serial: before the workers start)."""
-    ti.loop_config(serialize=True)
-    for q in range(MAX_PHASES):
-        for k in range(nw):
-            sync[_slot(q, k)] = 0
-        sync[_slot(q, MAX_WORKERS)] = 0
-        if q < MAX_STEPS:
-            rbuf[q, 0] = -1.0  # < 0: update not run
-            rbuf[q, 1] = -1.0
+    @ti.func
+    def local_start(x, c):
+        """The stationary level of a uniform input ``x`` (scalar or lane vector), as fitted by
+        :func:`cdnf_ti.solver.local_start_coefficients` (``c``: :func:`start_coefficients`):
+        ``g0 + x q(t)``, ``x`` clipped to ``[0, x_max]``, ``t = 2 x / x_max - 1``, ``q`` cubic."""
+        xc = ti.min(ti.max(x, 0.0), c[1])
+        t = xc * c[2] - 1.0
+        return c[0] + xc * (c[3] + t * (c[4] + t * (c[5] + t * c[6])))
 
 
-@ti.func
-def claim_rows(sync: ti.template(), phase, w, nw, H):
-    """Rows ``[i0, i1)`` of the next chunk of ``phase`` for worker ``w`` (``i0 >= i1``: none left)."""
-    i0 = H
-    i1 = H
-    for t in range(nw):
-        if i0 >= i1:
-            band = (w + t) % nw
-            top = band * H // nw
-            end = (band + 1) * H // nw
-            x = top + ti.atomic_add(sync[_slot(phase, band)], ROWS_PER_CLAIM)
-            if x < end:
-                i0 = x
-                i1 = ti.min(x + ROWS_PER_CLAIM, end)
-    return i0, i1
+    @ti.func
+    def border_index(i, n, mode: ti.template()):
+        """Map a possibly out-of-range index into [0, n) for the border mode."""
+        r = i
+        if ti.static(mode == REFLECT):
+            r = ti.abs(i)
+            if r >= n:
+                r = 2 * n - 2 - r
+            r = ti.min(ti.max(r, 0), n - 1)
+        else:
+            r = ti.min(ti.max(i, 0), n - 1)
+        return r
 
 
-@ti.func
-def finish_rows(sync: ti.template(), phase, rows):
-    ti.atomic_add(sync[_slot(phase, MAX_WORKERS)], rows)
+    @ti.func
+    def border_weight(i, n, mode: ti.template()):
+        """1 inside the frame; 0 outside it for the ``zero`` border, else 1."""
+        w = 1.0
+        if ti.static(mode == ZERO):
+            w = ti.select((i >= 0) & (i < n), 1.0, 0.0)
+        return w
 
 
-@ti.func
-def wait_phase(sync: ti.template(), phase, H):
-    """Spin until every row of ``phase`` is finished."""
-    while ti.atomic_add(sync[_slot(phase, MAX_WORKERS)], 0) < H:
-        pass
+    @ti.func
+    def block_span(k, width, blocks):
+        """Row and column range [j0, j1) of work item ``k`` (row-major items)."""
+        i = k // blocks
+        b = k % blocks
+        bw = ((width + blocks - 1) // blocks + CHUNK - 1) // CHUNK * CHUNK  # whole runs (row_runs)
+        j0 = ti.min(b * bw, width)
+        j1 = ti.min(j0 + bw, width)
+        return i, j0, j1
 
 
-@ti.func
-def worker_start():
-    """A worker's ``(go, ran, best)`` before its first update: go on, none run, no residual yet."""
-    return 1, 0, ti.f32(3.0e38)
+    @ti.func
+    def run_load(x: ti.template(), i, j, n: ti.template()):
+        """``x[i, j .. j + n - 1]`` as a float32 vector of n values."""
+        v = ti.Vector([0.0] * n, dt=ti.f32)
+        for c in ti.static(range(n)):
+            v[c] = ti.cast(x[i, j + c], ti.f32)
+        return v
 
 
-@ti.func
-def go_on(r, best, tol, grow):
-    """Whether to run the next update after one with residual ``r``; the new best residual.
-
-    Stop once ``r <= tol`` (converged) or ``r > grow * best`` (growing: the solver
-    restarts the recurrence from here).
-    """
-    go = ti.select((r > tol) & (r <= grow * best), 1, 0)
-    return go, ti.min(best, r)
+    @ti.func
+    def run_store(x: ti.template(), i, j, v, n: ti.template()):
+        """``x[i, j .. j + n - 1] = v``."""
+        for c in ti.static(range(n)):
+            x[i, j + c] = v[c]
 
 
-@ti.func
-def gate(sync: ti.template(), rbuf: ti.template(), go, best, j, phase, H, tol, grow):
-    """Before update ``j``: wait until ``phase`` (the last of update ``j - 1``) is finished, then
-    decide whether to run update ``j`` (:func:`_go_on`). Returns ``(go, best)``."""
-    if go != 0 and j > 0:
-        wait_phase(sync, phase, H)
-        go, best = go_on(ti.max(rbuf[j - 1, 0], rbuf[j - 1, 1]), best, tol, grow)
-    return go, best
+    @ti.func
+    def luminance_change(frame: ti.template(), L: ti.template(), P: ti.template(), i, j, n: ti.template(), scale, keep,
+                         grey_levels: ti.template()):
+        """Photoreceptors on the run ``(i, j .. j + n - 1)``: ``g = frame * scale`` (rounded to
+        integer grey levels when ``grey_levels``), ``P = keep (g - L)`` (``keep = 0`` on the
+        first frame), ``L = g``. Returns ``P``."""
+        g = run_load(frame, i, j, n) * scale
+        if ti.static(grey_levels):
+            g = ti.floor(g + 0.5)
+        p = keep * (g - run_load(L, i, j, n))
+        run_store(L, i, j, g, n)
+        run_store(P, i, j, p, n)
+        return p
 
 
-@ti.func
-def converged(sync: ti.template(), rbuf: ti.template(), go, ran, phase, H, tol):
-    """Whether the solve converged in this launch (``ran`` updates run; ``phase``: the last one's).
+    @ti.func
+    def run_sum(v, n: ti.template()):
+        """Sum of the n values of ``v``, accumulated in float64."""
+        s = ti.f64(0.0)
+        for c in ti.static(range(n)):
+            s += ti.cast(v[c], ti.f64)
+        return s
 
-    A worker that ran every update first waits for the last one to finish.
-    """
-    if go != 0 and ran > 0:
-        wait_phase(sync, phase, H)
-    last = ti.max(ran - 1, 0)
-    return (ran > 0) & (ti.max(rbuf[last, 0], rbuf[last, 1]) <= tol)
+
+    @ti.func
+    def _combine(acc, r, reduce: ti.template()):
+        """``acc + r`` (``reduce == "sum"``) or ``max(acc, r)``."""
+        out = acc + r
+        if ti.static(reduce == "max"):
+            out = ti.max(acc, r)
+        return out
+
+
+    @ti.func
+    def _single_columns(body: ti.template(), ctx: ti.template(), im, i, ip, j, stop, W, acc, reduce: ti.template()):
+        """Runs of one column ``j .. stop - 1`` (neighbour columns clamped); returns ``(acc, stop)``."""
+        while j < stop:
+            acc = _combine(acc, body(ctx, im, i, ip, ti.max(j - 1, 0), j, ti.min(j + 1, W - 1), 1), reduce)
+            j += 1
+        return acc, j
+
+
+    @ti.func
+    def row_runs(body: ti.template(), ctx: ti.template(), i, j0, j1, H, W, reduce: ti.template(),
+                 halo: ti.template()):
+        """Call ``body(ctx, im, i, ip, jm, j, jp, n)`` over the columns ``[j0, j1)`` of row ``i``.
+
+        ``im``/``ip`` are the rows above and below, ``jm``/``jp`` the first columns of the
+        left and right neighbours of the run ``j .. j + n - 1`` (clamped: replicate border).
+        Runs of ``n = CHUNK`` (then ``QUARTER``) columns keep ``halo`` columns either side
+        inside the frame (``halo`` >= 1: the body's horizontal reach); every other column is
+        a run of one.
+        Returns the ``reduce`` (``"sum"``: float64 sum; ``"max"``) of body's returns.
+        """
+        im = ti.min(ti.max(i - 1, 0), H - 1)
+        ip = ti.min(ti.max(i + 1, 0), H - 1)
+        acc, j = _single_columns(body, ctx, im, i, ip, j0, ti.min(j1, halo), W, ti.f64(0.0), reduce)
+        end = ti.min(j1, W - halo)
+        for n in ti.static((CHUNK, QUARTER)):
+            while j + n <= end:
+                acc = _combine(acc, body(ctx, im, i, ip, j - 1, j, j + 1, n), reduce)
+                j += n
+        acc, j = _single_columns(body, ctx, im, i, ip, j, j1, W, acc, reduce)
+        return acc
+
+
+    DogRowRunCtx = context("DogRowRunCtx", "v row1 row2 g1 g2 mode R")
+
+    @ti.func
+    def _dog_row_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
+        v, row1, row2, g1, g2 = ti.static(ctx.v, ctx.row1, ctx.row2, ctx.g1, ctx.g2)
+        mode, R = ti.static(ctx.mode, ctx.R)
+        W = v.shape[1]
+        a1 = ti.Vector([0.0] * n, dt=ti.f32)
+        a2 = ti.Vector([0.0] * n, dt=ti.f32)
+        for d in ti.static(range(-R, R + 1)):
+            x = ti.Vector([0.0] * n, dt=ti.f32)
+            if ti.static(n == 1):  # a column near the border: map the tap into the frame
+                x[0] = border_weight(j + d, W, mode) * v[i, border_index(j + d, W, mode)]
+            else:  # a run with every tap inside the frame
+                x = run_load(v, i, j + d, n)
+            a1 += g1[d + R] * x
+            a2 += g2[d + R] * x
+        run_store(row1, i, j, a1, n)
+        run_store(row2, i, j, a2, n)
+        return 0.0
+
+
+    @ti.func
+    def dog_row_pass(v: ti.template(), row1: ti.template(), row2: ti.template(), g1: ti.template(),
+                     g2: ti.template(), blocks, mode: ti.template(), R: ti.template()):
+        """Horizontal passes of a separable DoG: ``row1 = g1 (*)_x v``, ``row2 = g2 (*)_x v``.
+
+        ``g1``/``g2`` are 1-D profiles of length ``2R + 1`` (``R`` a compile-time radius:
+        the taps unroll). Called at a kernel's top level, the loop is the kernel's
+        parallel loop over (row, column-block) items.
+        """
+        for k in range(v.shape[0] * blocks):
+            dog_row_item(v, row1, row2, g1, g2, k, blocks, mode, R)
+
+
+    @ti.func
+    def dog_row_item(v: ti.template(), row1: ti.template(), row2: ti.template(), g1: ti.template(),
+                     g2: ti.template(), k, blocks, mode: ti.template(), R: ti.template()):
+        """Work item ``k`` (a row's column block, :func:`block_span`) of :func:`dog_row_pass`."""
+        H, W = v.shape[0], v.shape[1]
+        i, j0, j1 = block_span(k, W, blocks)
+        ctx = ti.static(DogRowRunCtx(v, row1, row2, g1, g2, mode, R))
+        row_runs(_dog_row_run, ctx, i, j0, j1, H, W, "sum", ti.static(max(R, 1)))
+
+
+    @ti.func
+    def dog_column_run(row1: ti.template(), row2: ti.template(), g1: ti.template(), g2: ti.template(),
+                       A, B, i, j, n: ti.template(), mode: ti.template(), R: ti.template()):
+        """Vertical pass on the run ``(i, j .. j + n - 1)``: ``A g1 (*)_y row1 - B g2 (*)_y row2`` = ``W_s (*) v``
+        (radius ``R``, unrolled; rows mapped by the border mode)."""
+        H = row1.shape[0]
+        b1 = ti.Vector([0.0] * n, dt=ti.f32)
+        b2 = ti.Vector([0.0] * n, dt=ti.f32)
+        for d in ti.static(range(-R, R + 1)):
+            ii = border_index(i + d, H, mode)
+            wgt = border_weight(i + d, H, mode)
+            b1 += (g1[d + R] * wgt) * run_load(row1, ii, j, n)
+            b2 += (g2[d + R] * wgt) * run_load(row2, ii, j, n)
+        return A * b1 - B * b2
+
+
+    @ti.kernel
+    def fill(x: F2, value: ti.f32):
+        """Set every element of ``x`` to ``value``."""
+        for i, j in x:
+            x[i, j] = value
+
+
+
+
+    def lane_layout(width: int) -> tuple[int, int]:
+        """``(E1, NB)``: last element holding a frame column, elements per row (:func:`layout`)."""
+        return layout(width, LANES)
+
+
+    @ti.func
+    def lane_shift(a, b, c, s: ti.template()):
+        """Lanes of ``b`` shifted by ``s`` columns (``a``/``c``: left/right neighbours)."""
+        out = ti.Vector([0.0] * LANES, dt=ti.f32)
+        for l in ti.static(range(LANES)):
+            if ti.static(l + s < 0):
+                out[l] = a[LANES + l + s]
+            elif ti.static(l + s >= LANES):
+                out[l] = c[l + s - LANES]
+            else:
+                out[l] = b[l + s]
+        return out
+
+
+    #: A lane array argument of an explicit-vector kernel (:func:`~cdnf_ti.taichi_runtime.vector_kernel`):
+    #: a vector ndarray of ``LANES`` float32 per element, shape (H, NB) or, with its two ping-pong
+    #: buffers first, (2, H, NB).
+    LANE2 = ti.types.ndarray(dtype=ti.types.vector(LANES, ti.f32), ndim=2)
+    LANE3 = ti.types.ndarray(dtype=ti.types.vector(LANES, ti.f32), ndim=3)
+
+
+    def lane_array(*lead: int, H: int, NB: int):
+        """A lane array for explicit-vector kernels: ``LANES`` float32 per element, shape
+        ``(*lead, H, NB)`` (``lead``: ``2`` for a field's two ping-pong buffers)."""
+        return ti.ndarray(ti.types.vector(LANES, ti.f32), (*lead, H, NB))
+
+
+    @ti.func
+    def lane_mask(e, W: ti.template()):
+        """1.0 on the lanes of element ``e`` that hold frame columns, else 0.0 (only the last one has any)."""
+        m = ti.Vector([1.0] * LANES, dt=ti.f32)
+        if e == ti.static((LANES + W - 1) // LANES):
+            for l in ti.static(range(LANES)):
+                if ti.static((W - 1) // LANES * LANES + l >= W):
+                    m[l] = 0.0
+        return m
+
+
+    @ti.func
+    def lane_get(x: ti.template(), p, i, e):
+        """Element ``(i, e)`` of buffer ``p`` of a lane field: ``x[p, i, e]``, or ``x[i, e]`` for a field of
+        one buffer."""
+        if ti.static(len(x.shape) == 3):
+            return x[p, i, e]
+        else:
+            return x[i, e]
+
+
+    @ti.func
+    def _lane_put(x: ti.template(), p, i, e, lane: ti.template(), val):
+        """Set one lane of element ``(i, e)`` of buffer ``p`` (see :func:`lane_get`)."""
+        if ti.static(len(x.shape) == 3):
+            x[p, i, e][lane] = val
+        else:
+            x[i, e][lane] = val
+
+
+    @ti.func
+    def fill_ghosts(x: ti.template(), p, i, left: ti.i32, right: ti.i32, W: ti.template(), R: ti.template(),
+                    mode: ti.template()):
+        """Write the R ghost columns left of column 0 / right of column W-1 of row ``i`` of buffer ``p``
+        (``p`` is ignored for a field of one buffer, see :func:`lane_get`)."""
+        if left:
+            for d in ti.static(range(1, R + 1)):
+                g = LANES - d  # flat position of column -d
+                val = ti.f32(0.0)
+                if ti.static(mode == REFLECT):
+                    val = lane_get(x, p, i, (LANES + d) // LANES)[(LANES + d) % LANES]
+                elif ti.static(mode == REPLICATE):
+                    val = lane_get(x, p, i, 1)[0]
+                _lane_put(x, p, i, g // LANES, g % LANES, val)
+        if right:
+            for d in ti.static(range(1, R + 1)):
+                g = LANES + W - 1 + d
+                val = ti.f32(0.0)
+                if ti.static(mode == REFLECT):
+                    s = LANES + W - 1 - d
+                    val = lane_get(x, p, i, s // LANES)[s % LANES]
+                elif ti.static(mode == REPLICATE):
+                    s = LANES + W - 1
+                    val = lane_get(x, p, i, s // LANES)[s % LANES]
+                _lane_put(x, p, i, g // LANES, g % LANES, val)
+
+
+    @ti.func
+    def lane_edge_diag(x: ti.template(), p, im, i, ip, e):
+        """``(centre, edge sum, diagonal sum)`` of the 3x3 windows of the LANES columns of element
+        ``(i, e)`` of buffer ``p`` (``im``/``ip``: the rows above and below; ghosts give the border)."""
+        c = lane_get(x, p, i, e)
+        v = lane_get(x, p, im, e) + lane_get(x, p, ip, e)
+        c_lo, c_hi = lane_neighbours(lane_get(x, p, i, e - 1)[LANES - 1], c, lane_get(x, p, i, e + 1)[0])
+        v_lo, v_hi = lane_neighbours(lane_get(x, p, im, e - 1)[LANES - 1] + lane_get(x, p, ip, e - 1)[LANES - 1], v,
+                                     lane_get(x, p, im, e + 1)[0] + lane_get(x, p, ip, e + 1)[0])
+        return c, v + c_lo + c_hi, v_lo + v_hi
+
+
+    @ti.func
+    def lane_neighbours(left, b, right):
+        """``(b shifted right by one column, b shifted left by one column)``.
+
+        ``left`` is the column before lane 0 and ``right`` the column after the last lane.
+        """
+        lo = ti.Vector([0.0] * LANES, dt=ti.f32)
+        hi = ti.Vector([0.0] * LANES, dt=ti.f32)
+        lo[0] = left
+        hi[LANES - 1] = right
+        for l in ti.static(range(1, LANES)):
+            lo[l] = b[l - 1]
+            hi[l - 1] = b[l]
+        return lo, hi
+
+
+    @ti.func
+    def record_residuals(rbuf: ti.template(), record: ti.template(), fields: ti.template()):
+        """Copy the residuals of a launch (``rbuf[j, f]``, -1: not run) into its record (serial tail)."""
+        for j in ti.static(range(MAX_STEPS)):
+            for f in ti.static(range(fields)):
+                record[j, RECORD_COEFS + f] = rbuf[j, f]
+
+
+    @ti.func
+    def launch_gate(record: ti.template(), j: ti.template(), n, tol, grow, fields: ti.template()):
+        """Whether update ``j`` (compile-time) of a launch of ``n`` runs, from the residuals of the
+        updates before it in ``record`` (:class:`LaunchRecord`): 1 if ``j < n`` and none of them
+        converged (every residual ``<= tol``), grew (:func:`go_on`) or was not run, else 0.
+
+        Generic solve kernels (one parallel loop per update) call it in every work item; the
+        record's earlier rows are final by then (the loops of a launch run one after another).
+        """
+        go = ti.select(j < n, 1, 0)
+        best = ti.f32(3.0e38)
+        for k in ti.static(range(j)):
+            r = record[k, RECORD_COEFS]
+            for f in ti.static(range(1, fields)):
+                r = ti.max(r, record[k, RECORD_COEFS + f])
+            g, best = go_on(r, best, tol, grow)
+            go = go & g
+        return go
+
+
+    @ti.func
+    def go_on(r, best, tol, grow):
+        """Whether to run the next update after one with residual ``r``; the new best residual.
+
+        Stop once ``r <= tol`` (converged) or ``r > grow * best`` (growing: the solver
+        restarts the recurrence from here).
+        """
+        go = ti.select((r > tol) & (r <= grow * best), 1, 0)
+        return go, ti.min(best, r)
+
+    return namespace(globals(), locals())

@@ -26,7 +26,8 @@ from typing import Iterator
 
 import numpy as np
 
-from ..taichi_runtime import current_arch, ensure_taichi
+from ..kernels import common
+from ..taichi_runtime import current_arch, ensure_taichi, kernels
 
 #: Image-size laws of the looming/receding square (``BasicStimulus.expansion``).
 EXPANSIONS = ("inverse", "linear")
@@ -281,11 +282,7 @@ def taichi_stimulus_kernels(width: int):
     :func:`cdnf_ti.kernels.common.column_blocks` of that arch.
     """
     arch = ensure_taichi(current_arch() or "cpu")
-    # lazy: kernels compile for the compiler/arch that ensure_taichi picks at run time
-    from ..kernels import stimuli as K
-    from ..kernels.common import column_blocks
-
-    return K, column_blocks(width, arch)
+    return kernels("stimuli"), common.column_blocks(width, arch)
 
 
 def check_seed(seed: object) -> int:

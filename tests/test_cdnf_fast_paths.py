@@ -12,12 +12,15 @@ import pytest
 from conftest import small_stimulus
 
 from cdnf_ti import CDNF, CDNFParams
+from cdnf_ti.backends.cdnf import LaneTaichiCDNFBackend, TaichiCDNFBackend
 from cdnf_ti.bench.inputs import standin_video
-from cdnf_ti.kernels.cdnf import EMPTY_HI, LANES
-from cdnf_ti.models.cdnf import LaneTaichiCDNFBackend, TaichiCDNFBackend
+from cdnf_ti.kernels.cdnf import EMPTY_HI
 from cdnf_ti.reference import NumpyCDNFBackend
 from cdnf_ti.stimuli.basic import basic_stimulus
 from cdnf_ti.stimuli.incoherent import incoherent_stimulus
+from cdnf_ti.taichi_runtime import lanes
+
+LANES = lanes()  # lanes per vector element of the fast path under this process's compiler
 
 BORDERS = ["replicate", "reflect", "zero"]
 
@@ -108,9 +111,9 @@ def test_narrow_frames_fall_back_to_generic_kernels():
     assert isinstance(model._be, TaichiCDNFBackend)
 
 
-def test_interleaved_models_of_one_size_share_the_workspace_without_mixing_state():
-    # Two models of the same frame size share one set of Taichi fields; stepping
-    # them alternately must give what each gives alone.
+def test_interleaved_models_of_one_size_keep_their_own_state():
+    # Two models of the same frame size each own their arrays and share the process's
+    # scratch; stepping them alternately must give what each gives alone.
     fa = list(small_stimulus("dark_looming", size=64).frames())
     fb = list(small_stimulus("light_receding", size=64).frames())
     alone_a = CDNF().run(fa).output
@@ -120,9 +123,26 @@ def test_interleaved_models_of_one_size_share_the_workspace_without_mixing_state
     for x, y in zip(fa, fb):
         out_a.append(ma.step(x).output)
         out_b.append(mb.step(y).output)
+    assert ma._be.ws is not mb._be.ws and ma._be.ws.sync is mb._be.ws.sync
     assert np.array_equal(np.array(out_a), alone_a)
     assert np.array_equal(np.array(out_b), alone_b)
     assert np.abs(alone_a - alone_b).max() > 1e-3  # the two streams really differ
+
+
+def _compiled_instances() -> int:
+    """Kernel instances compiled so far by the launchers of the engine's kernel modules."""
+    from cdnf_ti.taichi_runtime import kernels
+
+    return sum(getattr(v, "instances", lambda: 0)() for name in ("common", "cdnf", "lgmd", "sdnf")
+               for v in vars(kernels(name)).values())
+
+
+def test_a_second_model_of_a_frame_size_compiles_nothing_new():
+    frames = [np.ascontiguousarray(f[::2, ::3]) for f in standin_video(3, seed=5)]
+    CDNF().run(frames)
+    before = _compiled_instances()
+    CDNF().run(frames)
+    assert before > 0 and _compiled_instances() == before
 
 
 def _pending_rows(model, group):
@@ -185,8 +205,8 @@ def test_solve_gives_bit_identical_results_with_any_number_of_workers(workers):
         assert np.array_equal(got.diagnostics[k], two.diagnostics[k]), k
 
 
-def test_models_sharing_a_lane_workspace_in_threads_give_their_sequential_results():
-    """Two C-DNF models of one frame size share the lane workspace; run in two threads at once
+def test_models_sharing_the_scratch_in_threads_give_their_sequential_results():
+    """Two C-DNF models of one frame size share the process's scratch; run in two threads at once
     (as in a Dask worker with several threads) each still gives what it gives alone."""
     def frames(name):
         return list(basic_stimulus(name, height=96, width=96, start_half_size=2.0).frames())

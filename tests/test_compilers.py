@@ -103,13 +103,15 @@ def test_cuda_arch_runs_or_fails_with_one_line(compiler, tmp_path):
         assert len(err) == 1 and err[0].startswith("error:") and "cuda" in err[0], proc.stderr
 
 
-def test_kernel_modules_take_their_dsl_from_the_runtime():
+def test_kernel_modules_are_built_for_the_runtimes_dsl():
     from cdnf_ti.kernels import cdnf, common, lgmd, sdnf, stimuli
-    from cdnf_ti.taichi_runtime import dsl
+    from cdnf_ti.taichi_runtime import dsl, kernels
 
     for mod in (cdnf, common, lgmd, sdnf, stimuli):
-        assert mod.ti is dsl()
-    assert np.isfinite(float(cdnf.MAX_STEPS))
+        name = mod.__name__.rsplit(".", 1)[1]
+        built = kernels(name)
+        assert built.ti is dsl() and kernels(name) is built  # built once per process
+    assert np.isfinite(float(common.MAX_STEPS))  # the constants need no compiler
 
 
 @pytest.mark.parametrize("compiler", installed_compilers())
@@ -221,7 +223,8 @@ def test_the_lane_width_of_the_fast_path_suits_the_compiler(compiler):
     # both compilers run the lane kernels fastest with 32 lanes
     # (docs/PERFORMANCE.md, "Design decisions that still hold")
     code = ("from cdnf_ti.taichi_runtime import ensure_taichi\nensure_taichi('cpu')\n"
-            "from cdnf_ti.kernels import cdnf, common, lgmd\nprint(common.LANES, cdnf.LANES, lgmd.LANES)")
+            "from cdnf_ti.taichi_runtime import kernels\n"
+            "print(kernels('common').LANES, kernels('cdnf').LANES, kernels('lgmd').LANES)")
     env = dict(os.environ, **{COMPILER_ENV: compiler})
     env.pop(LANES_ENV, None)
     proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True,
@@ -235,13 +238,13 @@ _LANES_CHILD = """
 import numpy as np
 from cdnf_ti import CDNF
 from cdnf_ti.bench.inputs import standin_video
-from cdnf_ti.kernels import common
-from cdnf_ti.models.cdnf import LaneTaichiCDNFBackend
+from cdnf_ti.backends.cdnf import LaneTaichiCDNFBackend
+from cdnf_ti.taichi_runtime import kernels
 frames = [f[::2, ::2] for f in standin_video(6, seed=2)]
 fast = CDNF()
 a = fast.run(frames)
 b = CDNF(backend="numpy").run(frames)
-print(common.LANES, isinstance(fast._be, LaneTaichiCDNFBackend), np.max(np.abs(a.output - b.output)))
+print(kernels('common').LANES, isinstance(fast._be, LaneTaichiCDNFBackend), np.max(np.abs(a.output - b.output)))
 """
 
 

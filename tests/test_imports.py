@@ -183,14 +183,13 @@ def test_no_module_level_import_cycle():
 
 
 #: Imports that may stay inside functions: optional or heavy dependencies, platform modules,
-#: and Taichi itself and the kernels, which must be imported only after the compiler and
-#: arch are chosen at run time (cdnf_ti.taichi_runtime.ensure_taichi).
+#: and Taichi itself, which must be imported only after the compiler and arch are chosen at
+#: run time (cdnf_ti.taichi_runtime.ensure_taichi; the kernel modules import without it).
 LAZY_OK = ("taichi", "quadrants", "matplotlib", "distributed", "dask", "scipy", "torch", "fcntl",
-           "cdnf_ti.kernels",
            "aedat", "h5py", "hdf5plugin")  # the `events` extra: imported where an event file needs them
 
-#: Files of the engine branch (compiler layer, kernels, benchmarks), not yet held to the rule.
-ENGINE_FILES = {"cdnf_ti/models/cdnf.py", "cdnf_ti/taichi_runtime.py", "cdnf_ti/solver.py", "cdnf_ti/params.py"}
+#: Files not yet held to the rule: the compiler layer (it loads the compiler it chose), the solver and params.
+ENGINE_FILES = {"cdnf_ti/taichi_runtime.py", "cdnf_ti/solver.py", "cdnf_ti/params.py"}
 
 
 def _absolute(node: ast.ImportFrom, module: str, is_package: bool) -> str:
@@ -214,7 +213,7 @@ def test_imports_are_at_module_level_except_the_lazy_ones():
             for node in in_functions.values():
                 names = ([a.name for a in node.names] if isinstance(node, ast.Import)
                          else [_absolute(node, module, is_package)])
-                if not all(n.split(".")[0] in LAZY_OK or n.startswith("cdnf_ti.kernels") for n in names):
+                if not all(n.split(".")[0] in LAZY_OK for n in names):
                     late.append(f"{rel}:{node.lineno}: {ast.unparse(node)}")
     assert not late, "imports inside functions (move them to module level):\n" + "\n".join(late)
 
@@ -273,3 +272,38 @@ def _reachable(graph: dict[str, set[str]], start: str) -> set[str]:
 @pytest.mark.parametrize("engine", ENGINES)
 def test_no_engine_imports_a_reporter(engine):
     assert not _reachable(experiments_graph(), engine) & set(REPORTERS)
+
+
+#: The kernel modules (kernels/ at the repository root, installed as cdnf_ti.kernels).
+KERNEL_MODULES = tuple(f"cdnf_ti.kernels.{p.stem}" for p in sorted((ROOT / "kernels").glob("*.py"))
+                       if p.stem != "__init__")
+
+
+def test_importing_the_models_and_every_kernel_module_loads_no_compiler():
+    code = ("import sys\nimport cdnf_ti.models\n"
+            + "".join(f"import {m}\n" for m in KERNEL_MODULES)
+            + "print(sorted(m for m in ('taichi', 'quadrants') if m in sys.modules))")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert len(KERNEL_MODULES) >= 5 and proc.stdout.split("\n")[-2] == "[]"
+
+
+#: What models/ may not import: the compilers, the kernels' DSL modules and the compiler layer.
+ENGINE_MODULES = ("taichi", "quadrants", "cdnf_ti.kernels", "cdnf_ti.taichi_runtime", "cdnf_ti.backends")
+
+
+def test_the_models_import_neither_the_compiler_nor_the_kernels():
+    found = []
+    for path in sorted((ROOT / "cdnf_ti" / "models").glob("*.py")):
+        module, is_package = _module_of(path)
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = _absolute(node, module, is_package)
+                names = [base] + [f"{base}.{a.name}" for a in node.names]
+            else:
+                continue
+            if any(n == e or n.startswith(e + ".") for n in names for e in ENGINE_MODULES):
+                found.append(f"{path.relative_to(ROOT).as_posix()}:{node.lineno}: {ast.unparse(node)}")
+    assert not found, "models/ reaches into the engine:\n" + "\n".join(found)

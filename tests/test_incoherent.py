@@ -137,7 +137,9 @@ def test_taichi_kernels_match_numpy_reference(name):
 
 
 def test_render_kernel_matches_numpy_reference_on_random_states():
-    from cdnf_ti.kernels import stimuli as K
+    from cdnf_ti.taichi_runtime import kernels
+
+    K = kernels("stimuli")
 
     rng = np.random.default_rng(0)
     state = rng.integers(0, 4, size=(37, 53)).astype(np.int8)

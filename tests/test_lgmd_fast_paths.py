@@ -15,18 +15,26 @@ from conftest import small_stimulus
 from test_flgmd import noisy_stream
 from test_row_runs import moving_noise
 
+from cdnf_ti.backends.lgmd import (
+    LaneTaichiFLGMDBackend,
+    LaneTaichiLGMD1Backend,
+    LaneTaichiLGMD2Backend,
+    TaichiFLGMDBackend,
+    TaichiLGMD1Backend,
+    TaichiLGMD2Backend,
+)
 from cdnf_ti.bench.inputs import real_or_standin, standin_video
-from cdnf_ti.kernels.common import LANES
 from cdnf_ti.models import FLGMDParams, create_model
-from cdnf_ti.models.flgmd import FEEDBACK_STARTS, LaneTaichiFLGMDBackend, TaichiFLGMDBackend
-from cdnf_ti.models.lgmd1 import LaneTaichiLGMD1Backend, TaichiLGMD1Backend
-from cdnf_ti.models.lgmd2 import LaneTaichiLGMD2Backend, TaichiLGMD2Backend
+from cdnf_ti.models.flgmd import FEEDBACK_STARTS
+from cdnf_ti.taichi_runtime import lanes
 
 ALWAYS_ON = FLGMDParams(t_ffi=1e9)  # no FFI hold: the per-pixel layers run on every frame
 FAST_MODELS = ["lgmd1", "lgmd2", "flgmd_onn"]
 LANE_BACKEND = {"lgmd1": LaneTaichiLGMD1Backend, "lgmd2": LaneTaichiLGMD2Backend, "flgmd_onn": LaneTaichiFLGMDBackend}
 GENERIC_BACKEND = {"lgmd1": TaichiLGMD1Backend, "lgmd2": TaichiLGMD2Backend, "flgmd_onn": TaichiFLGMDBackend}
 STEPS = {"lgmd1": "sum_G", "lgmd2": "max_Ce", "flgmd_onn": "iterations"}  # a per-frame diagnostic of the layers
+
+LANES = lanes()  # lanes per vector element of the fast path under this process's compiler
 
 
 def default_params(model):
@@ -195,7 +203,7 @@ def test_narrow_frames_fall_back_to_generic_kernels(model):
 
 
 @pytest.mark.parametrize("model", FAST_MODELS)
-def test_interleaved_models_of_one_size_share_the_workspace_without_mixing_state(model):
+def test_interleaved_models_of_one_size_keep_their_own_state(model):
     fa = noisy_stream("dark_looming", seed=3, h=40, w=70)
     fb = noisy_stream("light_receding", seed=4, h=40, w=70)
     p = default_params(model)
@@ -205,7 +213,7 @@ def test_interleaved_models_of_one_size_share_the_workspace_without_mixing_state
     for x, y in zip(fa, fb):
         out_a.append(ma.step(x).output)
         out_b.append(mb.step(y).output)
-    assert ma._be.ws is mb._be.ws  # one set of fields for the frame size
+    assert ma._be.ws is not mb._be.ws and ma._be.ws.sync is mb._be.ws.sync  # own state, shared scratch
     assert np.array_equal(np.array(out_a), alone_a)
     assert np.array_equal(np.array(out_b), alone_b)
     assert np.abs(alone_a - alone_b).max() > 1e-4  # the two streams really differ

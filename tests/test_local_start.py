@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from cdnf_ti import CDNF, CDNFParams
+from cdnf_ti.backends.cdnf import LaneTaichiCDNFBackend, TaichiCDNFBackend
 from cdnf_ti.bench.inputs import standin_video
-from cdnf_ti.models.cdnf import LaneTaichiCDNFBackend, TaichiCDNFBackend
 from cdnf_ti.params import kernel_gains, resting_level, stationary_level, vartheta
 from cdnf_ti.reference import NumpyCDNFBackend
 from cdnf_ti.solver import cdnf_local_starts, local_start

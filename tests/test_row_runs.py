@@ -43,8 +43,9 @@ def test_taichi_matches_numpy_reference_at_every_frame_size(model, size):
 def test_run_max_is_the_largest_value_and_leaves_its_argument_unchanged(n):
     """``run_max`` (a tree of pairwise maxima, also the lane vectors' reduction) equals NumPy's max
     wherever the largest value sits, negatives and ties included, and its caller's vector is not changed."""
-    from cdnf_ti.kernels.common import run_max
-    from cdnf_ti.taichi_runtime import dsl
+    from cdnf_ti.taichi_runtime import dsl, kernels
+
+    run_max = kernels("common").run_max
 
     ti = dsl()
 

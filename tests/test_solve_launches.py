@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from cdnf_ti import CDNFParams, create_model
+from cdnf_ti.backends.cdnf import TaichiCDNFBackend
 from cdnf_ti.bench.inputs import standin_video
 from cdnf_ti.kernels.common import MAX_STEPS, LaunchRecord
-from cdnf_ti.models.cdnf import TaichiCDNFBackend
 from cdnf_ti.reference import NumpyCDNFBackend
 from cdnf_ti.solver import RESTART_GROWTH, ChebyshevSchedule
 

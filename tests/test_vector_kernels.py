@@ -3,7 +3,7 @@ the lane helpers they use in place of ``.any()``/``ti.abs``, and the compile opt
 
 import numpy as np
 
-from cdnf_ti.taichi_runtime import dsl, vector_kernel
+from cdnf_ti.taichi_runtime import dsl, kernels, scalar_kernel, vector_kernel
 
 ti = dsl()
 
@@ -19,7 +19,8 @@ def _cases(lanes: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_any_lane_sees_a_difference_in_any_single_lane():
-    from cdnf_ti.kernels.common import LANES, any_lane
+    C = kernels("common")
+    LANES, any_lane = C.LANES, C.any_lane
 
     V = ti.types.vector(LANES, ti.f32)
 
@@ -40,7 +41,8 @@ def test_any_lane_sees_a_difference_in_any_single_lane():
 
 
 def test_lane_abs_is_the_absolute_value_of_every_lane():
-    from cdnf_ti.kernels.common import LANES, lane_abs
+    C = kernels("common")
+    LANES, lane_abs = C.LANES, C.lane_abs
 
     V = ti.types.vector(LANES, ti.f32)
 
@@ -60,7 +62,7 @@ def test_lane_abs_is_the_absolute_value_of_every_lane():
 def test_vector_kernel_restores_the_compile_option_for_the_kernels_compiled_after_it():
     """A kernel of the usual kind (a ``Vector.field``, unary minus and ``ti.abs`` on vectors: constructs
     that only compile scalarised) still compiles and runs after a vector kernel compiled."""
-    from cdnf_ti.kernels.common import LANES
+    LANES = kernels("common").LANES
 
     V = ti.types.vector(LANES, ti.f32)
 
@@ -87,3 +89,81 @@ def test_vector_kernel_restores_the_compile_option_for_the_kernels_compiled_afte
 
     negate_abs()
     np.testing.assert_array_equal(f.to_numpy(), np.full((2, 4), -1.0, np.float32))
+
+
+def test_compiling_a_kernel_puts_back_the_compile_option_it_found():
+    """``vector_kernel``/``scalar_kernel`` restore the option's previous value, not a fixed one."""
+    LANES = kernels("common").LANES
+    V = ti.types.vector(LANES, ti.f32)
+    cfg = ti.lang.impl.current_cfg()
+
+    @vector_kernel
+    @ti.kernel
+    def twice(a: ti.types.ndarray(dtype=V, ndim=1)):
+        for e in range(a.shape[0]):
+            a[e] = a[e] * 2.0
+
+    @scalar_kernel
+    @ti.kernel
+    def add_one(a: ti.types.ndarray(dtype=ti.f32, ndim=1)):
+        for e in range(a.shape[0]):
+            a[e] = a[e] + 1.0
+
+    before = cfg.real_matrix_scalarize
+    try:
+        cfg.real_matrix_scalarize = False
+        x, y = ti.ndarray(V, 2), np.zeros(3, np.float32)
+        x.fill(1.0)
+        twice(x)
+        assert cfg.real_matrix_scalarize is False
+        add_one(y)  # compiled scalarised, and the option is False again after it
+        assert cfg.real_matrix_scalarize is False
+    finally:
+        cfg.real_matrix_scalarize = before
+    np.testing.assert_array_equal(x.to_numpy(), np.full((2, LANES), 2.0, np.float32))
+    np.testing.assert_array_equal(y, np.ones(3, np.float32))
+    assert twice.scalarize is False and add_one.scalarize is True
+
+
+def test_two_threads_compile_vector_and_scalar_kernels_each_in_its_own_mode():
+    """A scalar kernel compiled while another thread compiles vector kernels still compiles scalarised:
+    unary minus on a vector, below, aborts the compilation of a vector kernel (tests/test_compiler_workarounds.py)."""
+    import threading
+
+    LANES = kernels("common").LANES
+    V = ti.types.vector(LANES, ti.f32)
+    V4 = ti.types.vector(4, ti.f32)
+
+    @scalar_kernel
+    @ti.kernel
+    def negate(a: ti.types.ndarray(dtype=V4, ndim=1), k: ti.template()):
+        for i in range(a.shape[0]):
+            a[i] = -(a[i] + k)
+
+    @vector_kernel
+    @ti.kernel
+    def scale(a: ti.types.ndarray(dtype=V, ndim=1), k: ti.template()):
+        for e in range(a.shape[0]):
+            a[e] = a[e] * k
+
+    x, y = ti.ndarray(V, 2), ti.ndarray(V4, 2)
+    x.fill(1.0)
+    y.fill(0.0)
+    errors = []
+
+    def run(fn, count):
+        try:
+            for k in range(count):
+                fn(k)
+        except Exception as e:  # noqa: BLE001 - reported below
+            errors.append(e)
+
+    threads = [threading.Thread(target=run, args=(lambda k: scale(x, k + 2), 4)),
+               threading.Thread(target=run, args=(lambda k: negate(y, k), 4))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors
+    np.testing.assert_array_equal(x.to_numpy(), np.full((2, LANES), 120.0, np.float32))  # 2 * 3 * 4 * 5
+    np.testing.assert_array_equal(y.to_numpy(), np.full((2, 4), -2.0, np.float32))  # -(-(-(0+0)+1)+2)+3)

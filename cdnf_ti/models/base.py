@@ -11,10 +11,8 @@ from __future__ import annotations
 import contextlib
 import csv
 import io
-import threading
 import time
 import warnings
-import weakref
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Iterable, Protocol, Sequence, runtime_checkable
 
@@ -23,7 +21,6 @@ from tqdm import tqdm
 
 from ..atomic import atomic_write_text
 from ..frames import to_grey
-from ..taichi_runtime import ensure_taichi, select_compiler
 
 
 class NotConvergedWarning(RuntimeWarning):
@@ -262,6 +259,11 @@ class Model:
     params_type: ClassVar[type] = object
     description: ClassVar[str] = ""
     BACKENDS: ClassVar[tuple[str, ...]] = ("taichi", "numpy")
+    #: The engine that compiles the kernels and builds a model's ``"taichi"`` backend
+    #: (:class:`cdnf_ti.backends.Engine`: ``select_compiler(name)``, ``start(arch)``,
+    #: ``backend(model, shape)``). Installed by the ``cdnf_ti`` package, so that models/
+    #: states equations and control only and never imports the compiler.
+    engine: ClassVar[Any] = None
 
     #: Threshold sweep (:class:`Sweepable`): defaults; a model opts in by defining ``sweep_alerts``.
     sweep_parameter: ClassVar[str] = "threshold"
@@ -284,14 +286,14 @@ class Model:
         self.backend_name = backend
         self.arch = arch
         if backend == "taichi" and compiler is not None:
-            select_compiler(compiler)  # before any kernel module is imported
+            self._engine().select_compiler(compiler)  # before the runtime starts
         self.compiler = compiler
         self.fps = float(fps)
         self._unconverged = 0
         self._be: ModelBackend | None = None
         self._t = 0
         if backend == "taichi":
-            ensure_taichi(arch)
+            self._engine().start(arch)
         self._setup()
         self._reset_state()
 
@@ -364,8 +366,15 @@ class Model:
 
     # -- hooks supplied by each model ---------------------------------------------
     def _taichi_backend(self, shape: tuple[int, int]) -> ModelBackend:
-        """The Taichi backend for frames of ``shape`` (H, W)."""
-        raise NotImplementedError(f"{type(self).__name__} has no Taichi backend")
+        """The compiled backend for frames of ``shape`` (H, W), from the engine (:attr:`engine`)."""
+        return self._engine().backend(self, tuple(shape))
+
+    @classmethod
+    def _engine(cls) -> Any:
+        """The engine that builds compiled backends (:attr:`engine`)."""
+        if cls.engine is None:
+            raise RuntimeError("no engine installed: import cdnf_ti (it installs cdnf_ti.backends.ENGINE)")
+        return cls.engine
 
     def _numpy_backend(self, shape: tuple[int, int]) -> ModelBackend:
         """The NumPy float64 reference backend for frames of ``shape`` (H, W)."""
@@ -489,51 +498,3 @@ def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bo
     return traces
 
 
-class SharedWorkspace:
-    """Taichi fields for one frame size, shared by the fast backends of one kind and size.
-
-    Fast kernels take fields as template arguments, so they compile once per field
-    set; one set per (kind, frame size) keeps that to one compile per size. The
-    backend that last used a workspace owns it (``owner``: a weakref); another
-    backend of the same size first evicts the owner's state to NumPy. ``lock``
-    serialises frames of models that share it (a Dask worker with several threads,
-    a host program's threads): :meth:`Model.step` holds the backend's ``lock``.
-    """
-
-    _pool: "ClassVar[dict[tuple[type, tuple[int, int]], SharedWorkspace]]" = {}
-    _pool_lock = threading.Lock()
-
-    def __init__(self, shape: tuple[int, int]):
-        self.shape = tuple(shape)
-        self.owner: Any = None
-        self.lock = threading.RLock()
-
-    def take(self, backend: Any) -> bool:
-        """Make ``backend`` the owner, first evicting the current owner's state (its ``_evict()``).
-
-        Returns True when ``backend`` was not the owner (its state must be put back).
-        """
-        owner = self.owner() if self.owner is not None else None
-        if owner is backend:
-            return False
-        if owner is not None:
-            owner._evict()
-        self.owner = weakref.ref(backend)
-        return True
-
-    def frame(self, x: np.ndarray) -> np.ndarray:
-        """The (H, W) frame columns of a lane field's ``to_numpy()`` array (H, NB, LANES)."""
-        from ..kernels.common import LANES
-
-        H, W = self.shape
-        return np.ascontiguousarray(x.reshape(H, -1)[:, LANES:LANES + W])
-
-    @classmethod
-    def get(cls, shape: tuple[int, int]) -> Any:
-        """The workspace of this kind for frames of ``shape`` (H, W), built on first use."""
-        key = (cls, tuple(shape))
-        with SharedWorkspace._pool_lock:
-            ws = SharedWorkspace._pool.get(key)
-            if ws is None:
-                ws = SharedWorkspace._pool[key] = cls(tuple(shape))
-            return ws

@@ -44,15 +44,14 @@ The reconstruction, per frame (grey levels 0..255, ``dt = 1000 // fps``):
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from ..baselines_reference import NumpyFLGMDBackend
 from ..params import ModelParams, check_params, contrast_kernel, kernel_spectrum
-from ..solver import RESTART_GROWTH, solve_fixed_point
+from ..solver import solve_fixed_point
 from .lgmd1 import LGMD1, LGMD1Params, lgmd1_checks
-from .lgmd2 import LaneTaichiLGMDBackend, LGMDLanes, TaichiLGMDBackend, lowpass_coefficient
+from .lgmd2 import lowpass_coefficient
 from .registry import register_model
 
 #: Where the feedback iteration starts each frame (:attr:`FLGMDParams.start`).
@@ -216,172 +215,10 @@ def feedback_stencil(ge: np.ndarray, k_lateral: tuple[float, float], a: tuple[fl
             float(ge[0, 0]) - w_i * k_lateral[1] * a[1])
 
 
-class TaichiFLGMDBackend(TaichiLGMDBackend):
-    """F-LGMD layers in Taichi (see :class:`FLGMDONn`): feedback iteration on the ON/OFF channels.
-
-    Per frame: :meth:`load` writes the drives ``ON0``/``OFF0``; :meth:`prepare` the
-    constant inhibition ``Q`` of both channels and the iterate's start;
-    :meth:`feedback_iterate` one relaxed update; :meth:`finish` the layers at the
-    fixed point.
-    """
-
-    LAYERS = ("S_on", "S_off", "S", "G")
-    #: Current, previous (settled) and scratch buffers per channel.
-    CHANNEL_BUFFERS = 3
-
-    def _setup(self) -> None:
-        p, dt = self.params, self.dt
-        self.on0, self.off0 = self._nd(), self._nd()
-        self.q_on, self.q_off = self._nd(), self._nd()
-        self.a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
-        self.w_on, self.w_off = p.feedback_stencils(dt)
-        start_on, start_off = p.local_start_gains(dt)
-        self.start_gains = (*start_on, *start_off)  # w, kappa of ON, then of OFF
-        self._iterate_out = np.zeros(2)  # flgmd_iterate's residuals of ON, OFF
-        self._finish_out = np.zeros(1)  # flgmd_finish's sum G
-
-    def reset(self) -> None:
-        super().reset()
-        self.pi = 1  # index of the previous (settled) buffers
-        self.ni = 2  # scratch buffers
-
-    def _channel_targets(self) -> tuple[Any, Any, Any, Any]:
-        """The drives ``ON0``/``OFF0`` from the settled channels ``on[c]``/``off[c]``."""
-        return self.on0, self.off0, self.on[self.c], self.off[self.c]
-
-    def prepare(self) -> None:
-        # the settled current buffers become the previous ones
-        self.pi, self.c = self.c, self.pi
-        p = self.params
-        self.K.flgmd_prepare(self.on0, self.off0, self.on[self.c], self.off[self.c], self.on[self.pi],
-                             self.off[self.pi], self.q_on, self.q_off, *p.k_lateral, *self.a,
-                             p.w_i_on, p.w_i_off, *self.start_gains, self.blocks)
-
-    def feedback_iterate(self, lam: float, mom: float = 0.0) -> tuple[float, float]:
-        """One update ``X <- X + mom (X - X_prev) + lam (T(X) - X)``; returns the residuals before it."""
-        p = self.params
-        c, n = self.c, self.ni
-        with_off = p.beta_off != 0.0
-        out = self._iterate_out
-        out.fill(0.0)
-        self.K.flgmd_iterate(self.on0, self.off0, self.on[c], self.off[c], self.q_on, self.q_off,
-                             self.on[n], self.off[n], *self.w_on, *self.w_off,
-                             p.beta_on, p.beta_off, lam, mom, self.blocks, with_off, out)
-        if with_off:
-            self.c, self.ni = n, c
-        else:
-            # only ON was iterated: swap the ON buffers, keep OFF in place
-            self.on[c], self.on[n] = self.on[n], self.on[c]
-        return float(out[0]), float(out[1])
-
-    def finish(self) -> float:
-        p = self.params
-        c = self.c
-        out = self._finish_out
-        out.fill(0.0)
-        self.K.flgmd_finish(self.on[c], self.off[c], self.q_on, self.q_off, self.S_on, self.S_off,
-                            self.S, self.G, *self.w_on, *self.w_off, p.t_s, self.blocks, out)
-        return float(out[0])
-
-    def hold(self) -> None:
-        """FFI-held frame: the channels keep their previous values (nothing to do)."""
 
 
-class _FLGMDLanes(LGMDLanes):
-    LAYERS = ("L", "P", "on", "off", "on0", "off0", "q_on", "q_off", "S_on", "S_off", "S", "G")
-    #: the settled channel of the last frame and two buffers for the iteration
-    CHANNEL_BUFFERS = 3
 
 
-class LaneTaichiFLGMDBackend(LaneTaichiLGMDBackend):
-    """The fast F-LGMD backend on the CPU: the layers in lane arrays (float32 vector ndarrays).
-
-    Same interface, equations, iteration schedule and residuals as
-    :class:`TaichiFLGMDBackend`; the kernels are :func:`~cdnf_ti.kernels.lgmd.lgmd_lanes_load`
-    (with the frame's constant inhibition ``Q`` and the iterate's start, so :meth:`prepare`
-    only picks buffers) and ``flgmd_lanes_*``. A whole solve runs in one launch
-    (:meth:`feedback_iterate_many`), which also computes the layers when it converges.
-    """
-
-    workspace_type = _FLGMDLanes
-    FIELD_LAYERS = TaichiFLGMDBackend.LAYERS
-
-    def _setup(self) -> None:
-        p, dt = self.params, self.dt
-        self.steps = self.K.MAX_STEPS  # updates per solve launch (feedback_iterate_many)
-        self._tol32 = float(np.float32(p.tol))
-        self._sum_g: float | None = None  # sum G computed by a converged solve launch
-        from ..kernels.common import LaunchRecord
-
-        self._record = LaunchRecord(2)  # flgmd_lanes_solve's coefficients in, residuals out
-        self._solve_out = np.zeros(1)  # flgmd_lanes_solve's sum G (-1: not converged)
-        self._finish_out = np.zeros(1)  # flgmd_lanes_finish's sum G
-        a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
-        # edge and diagonal weights of Q = w_i sum K (1 - a) X(t-1), per channel
-        self.q_weights = tuple(w * k * (1.0 - x) for w in (p.w_i_on, p.w_i_off) for k, x in zip(p.k_lateral, a))
-        self.w_on, self.w_off = p.feedback_stencils(dt)
-        start_on, start_off = p.local_start_gains(dt)
-        self.start_gains = (*start_on, *start_off)  # w, kappa of ON, then of OFF
-
-    def _reset_buffers(self) -> None:
-        self.settled = [0, 0]  # buffer of the settled ON, OFF channel
-        self.iterate = [1, 1]  # buffer of the current iterate of ON, OFF
-
-    def load(self, grey: np.ndarray, first: bool) -> float:
-        """Photoreceptors, drives, constant inhibition and the iterate's start; returns ``sum |P|``."""
-        ws = self._acquire()
-        self.iterate = [(c + 1) % 3 for c in self.settled]
-        self._sum_g = None
-        return self._load(grey, first, self.settled[0], self.iterate[0], self.settled[1], self.iterate[1],
-                          (ws.on0, ws.off0, ws.q_on, ws.q_off, *self.q_weights, *self.start_gains))
-
-    def prepare(self) -> None:
-        """Nothing to compute: :meth:`load` wrote ``Q`` and the iterate's start."""
-
-    def feedback_iterate(self, lam: float, mom: float = 0.0) -> tuple[float, float]:
-        """One update ``X <- X + mom (X - X_prev) + lam (T(X) - X)``; returns the residuals before it."""
-        return self.feedback_iterate_many([(lam, mom)])[0]
-
-    def feedback_iterate_many(self, coefs) -> list[tuple[float, float]]:
-        """Several updates in one launch (``coefs``: ``(lam, mom)`` each, at most ``steps``); see the solver.
-
-        A launch that converges also computes the layers at the fixed point (:meth:`finish`
-        then only reads ``sum G``).
-        """
-        ws = self._acquire()
-        p = self.params
-        with_off = p.beta_off != 0.0
-        cur = list(self.iterate)
-        other = [3 - self.settled[k] - cur[k] for k in range(2)]  # the third buffer: the iterate before
-        rec, out = self._record, self._solve_out
-        self.K.flgmd_lanes_solve(ws.on0, ws.off0, ws.on, ws.off, ws.q_on, ws.q_off, ws.S_on, ws.S_off, ws.S, ws.G,
-                                 cur[0], other[0], cur[1], other[1], *self.w_on, *self.w_off, p.beta_on,
-                                 p.beta_off, p.t_s, rec.start(coefs), len(coefs), self._tol32, RESTART_GROWTH,
-                                 self.nw, ws.sync, ws.rbuf, ws.msum, self.W, with_off, out)
-        res = rec.residuals(len(coefs))
-        if len(res) % 2:
-            self.iterate = [other[0], other[1] if with_off else cur[1]]
-        self._sum_g = float(out[0]) if out[0] >= 0.0 else None
-        return res
-
-    def finish(self) -> float:
-        """The layers at the fixed point; returns ``sum G`` (already computed by a converged launch)."""
-        self.settled = list(self.iterate)
-        if self._sum_g is not None:
-            return self._sum_g
-        ws = self._acquire()
-        p = self.params
-        out = self._finish_out
-        out.fill(0.0)
-        self.K.flgmd_lanes_finish(ws.on, ws.off, *self.settled, ws.q_on, ws.q_off, ws.S_on, ws.S_off,
-                                  ws.S, ws.G, *self.w_on, *self.w_off, p.t_s, self.W, out)
-        return float(out[0])
-
-    def hold(self) -> None:
-        """FFI-held frame: the channels keep their previous values (nothing to do)."""
-
-    def _channel_buffers(self) -> tuple[int, int]:
-        return self.settled[0], self.settled[1]
 
 
 @register_model
@@ -411,8 +248,6 @@ class FLGMDONn(LGMD1):
     description = ("F-LGMD ONn (after Chang et al. 2023): LGMD with instant negative ON feedback "
                    "solved as a fixed point -- RECONSTRUCTION")
 
-    taichi_backend_type = TaichiFLGMDBackend
-    lane_backend_type = LaneTaichiFLGMDBackend
     numpy_backend_type = NumpyFLGMDBackend
 
     def _diag0(self) -> dict[str, float]:

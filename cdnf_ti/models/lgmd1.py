@@ -27,7 +27,7 @@ import numpy as np
 from ..baselines_reference import NumpyLGMD1Backend
 from ..params import ModelParams, check_params
 from .base import StepResult
-from .lgmd2 import LGMDFamily, LGMDLanes, PingPongLaneLGMDBackend, TaichiLGMDBackend, lowpass_coefficient
+from .lgmd2 import LGMDFamily
 from .registry import register_model
 
 
@@ -102,54 +102,10 @@ def lgmd1_checks(p: LGMD1Params | Any) -> list[tuple[bool, str]]:
     ]
 
 
-class TaichiLGMD1Backend(TaichiLGMDBackend):
-    """LGMD1 layers in Taichi (see :class:`LGMD1`)."""
-
-    LAYERS = ("I_on", "E_off", "S", "G")
-
-    def _setup(self) -> None:
-        p, dt = self.params, self.dt
-        self.a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
-        self._layers_out = np.zeros(1)  # lgmd1_layers' sum G
-
-    def layers(self) -> float:
-        """Delayed spreads, S (thresholded), G (ON/OFF from :meth:`load`); returns ``sum G``."""
-        p = self.params
-        c, q = self._next_buffers()
-        out = self._layers_out
-        out.fill(0.0)
-        self.K.lgmd1_layers(self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.E_off,
-                            self.S, self.G, p.w_i_on, p.w_i_off, *p.k_lateral, *self.a,
-                            p.w_on_exc, p.w_off_exc, p.w_onoff, p.t_s, self.blocks, out)
-        return float(out[0])
 
 
-class _LGMD1Lanes(LGMDLanes):
-    LAYERS = ("L", "P", "on", "off", "I_on", "E_off", "S", "G")
 
 
-class LaneTaichiLGMD1Backend(PingPongLaneLGMDBackend):
-    """LGMD1 layers on lane fields (see :class:`LGMD1`): a frame's layers in one launch."""
-
-    workspace_type = _LGMD1Lanes
-    FIELD_LAYERS = ("I_on", "E_off", "S", "G")
-
-    def _setup(self) -> None:
-        p, dt = self.params, self.dt
-        self.a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
-        self._layers_out = np.zeros(1)  # lgmd1_lanes_layers' sum G
-
-    def layers(self) -> float:
-        """Delayed spreads, S (thresholded), G (ON/OFF from :meth:`load`); returns ``sum G``."""
-        ws = self._acquire()
-        p = self.params
-        c, q = self._next_buffers()
-        out = self._layers_out
-        out.fill(0.0)
-        self.K.lgmd1_lanes_layers(ws.on, ws.off, c, q, ws.I_on, ws.E_off, ws.S, ws.G, p.w_i_on, p.w_i_off,
-                                  *p.k_lateral, *self.a, p.w_on_exc, p.w_off_exc, p.w_onoff, p.t_s, self.nw,
-                                  ws.sync, ws.rbuf, ws.msum, self.W, out)
-        return float(out[0])
 
 
 @register_model
@@ -175,9 +131,7 @@ class LGMD1(LGMDFamily):
     params_type = LGMD1Params
     description = "LGMD1 with ON/OFF pathways and SFA (Fu et al. 2018); equations from the authors' code"
 
-    taichi_backend_type = TaichiLGMD1Backend
     numpy_backend_type = NumpyLGMD1Backend
-    lane_backend_type = LaneTaichiLGMD1Backend
 
     def _step(self, t: int, grey: np.ndarray, sum_p: float) -> StepResult:
         p = self.params

@@ -35,8 +35,7 @@ import numpy as np
 
 from ..baselines_reference import NumpyLGMD2Backend
 from ..params import ModelParams, check_params, sigmoid
-from ..taichi_runtime import cpu_threads, dsl, ensure_taichi
-from .base import Model, SharedWorkspace, StepResult, Trace
+from .base import Model, StepResult, Trace
 from .registry import register_model
 
 
@@ -162,303 +161,18 @@ class LGMD2Params(ModelParams):
         ])
 
 
-class TaichiLGMDBackend:
-    """Layers of an LGMD-family model in Taichi ndarrays (float32), driven by :mod:`cdnf_ti.kernels.lgmd`.
-
-    The family's shared part: photoreceptors ``L``/``P``, the ON/OFF channel
-    buffers, ``load``, ``reset`` and ``fields``. Each model's subclass names its
-    own layers (``LAYERS``), sets its constants (:meth:`_setup`) and runs its
-    kernels.
-
-    Parameters
-    ----------
-    params : LGMD2Params, LGMD1Params or FLGMDParams
-    shape : (H, W)
-    dt : int
-        Frame interval (ms).
-    arch : str
-    """
-
-    name = "taichi"
-    #: The model's own layers besides ``P``, ``ON``, ``OFF`` (allocated here, listed by :meth:`fields`).
-    LAYERS: tuple[str, ...] = ()
-    #: Buffers per ON/OFF channel (current and previous frame).
-    CHANNEL_BUFFERS = 2
-
-    def __init__(self, params: Any, shape: tuple[int, int], dt: int, arch: str = "cpu"):
-        arch = ensure_taichi(arch)  # the arch in use ("gpu" resolves to one)
-        # lazy: kernels compile for the compiler/arch that ensure_taichi picks at run time
-        from ..kernels import lgmd as K
-        from ..kernels.common import column_blocks
-
-        self.K = K
-        self.params = params
-        self.shape = tuple(shape)
-        self.blocks = column_blocks(self.shape[1], arch)  # work items per row
-        self.dt = dt
-        self._arrays: list[Any] = []
-        self._load_out = np.zeros(1)  # load_frame's sum |P|
-        self.L, self.P = self._nd(), self._nd()
-        self.on = [self._nd() for _ in range(self.CHANNEL_BUFFERS)]
-        self.off = [self._nd() for _ in range(self.CHANNEL_BUFFERS)]
-        for layer in self.LAYERS:
-            setattr(self, layer, self._nd())
-        self._setup()
-        self.reset()
-
-    def _nd(self) -> Any:
-        """A new (H, W) float32 ndarray, zeroed by :meth:`reset`."""
-        ti = dsl()  # taichi or quadrants, chosen at run time
-        a = ti.ndarray(ti.f32, self.shape)
-        self._arrays.append(a)
-        return a
-
-    def _setup(self) -> None:
-        """The model's constants (delay coefficients, kernels) and extra buffers."""
-
-    def reset(self) -> None:
-        for a in self._arrays:
-            self.K.fill(a, 0.0)
-        self.c = 0  # index of the current ON/OFF buffers
-
-    def load(self, grey: np.ndarray, first: bool) -> float:
-        """Photoreceptors and this frame's ON/OFF channels (into :meth:`_channel_targets`); returns ``sum |P|``."""
-        scale = 1.0 if grey.dtype == np.uint8 else 255.0
-        p = self.params
-        out = self._load_out
-        out.fill(0.0)
-        self.K.load_frame(grey, self.L, self.P, *self._channel_targets(), scale, int(first), p.clip, p.dc,
-                          self.blocks, out)
-        return float(out[0])
-
-    def _channel_targets(self) -> tuple[Any, Any, Any, Any]:
-        """``(ON, OFF, ON(t-1), OFF(t-1))`` buffers of :meth:`load`: the next ping-pong buffers,
-        made current by :meth:`_next_buffers` when the layers run (an FFI-held frame keeps the old ones)."""
-        c, n = self.c, 1 - self.c
-        return self.on[n], self.off[n], self.on[c], self.off[c]
-
-    def _next_buffers(self) -> tuple[int, int]:
-        """Make the other ON/OFF buffers current: ``(current, previous)`` indices."""
-        c, q = 1 - self.c, self.c  # new current, previous
-        self.c = c
-        return c, q
-
-    def fields(self) -> dict[str, np.ndarray]:
-        c = self.c
-        out = {"P": self.P.to_numpy(), "ON": self.on[c].to_numpy(), "OFF": self.off[c].to_numpy()}
-        for k in self.LAYERS:
-            out[k] = getattr(self, k).to_numpy()
-        return out
 
 
-class TaichiLGMD2Backend(TaichiLGMDBackend):
-    """LGMD2 layers in Taichi (see :class:`LGMD2`)."""
-
-    LAYERS = ("I_on", "I_off", "S", "Ce", "G")
-
-    def _setup(self) -> None:
-        p, dt = self.params, self.dt
-        self.an = tuple(lowpass_coefficient(dt, t) for t in p.tau_on)
-        self.af = tuple(lowpass_coefficient(dt, t) for t in p.tau_off)
-        self._layers_out = np.zeros(2)  # lgmd2_layers' sum G, max |Ce|
-
-    def layers(self, w_on: float, w_off: float) -> tuple[float, float]:
-        """Delayed inhibition, S, grouping (ON/OFF from :meth:`load`); returns ``(sum G, max |Ce|)``."""
-        p = self.params
-        c, q = self._next_buffers()
-        out = self._layers_out
-        out.fill(0.0)
-        self.K.lgmd2_layers(self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.I_off,
-                            self.S, self.Ce, self.G, w_on, w_off,
-                            *p.k_on, *self.an, *p.k_off, *self.af, p.w_on_exc, p.w_off_exc, p.w_onoff,
-                            p.delta_c, p.c_w, p.c_de, p.t_de, self.blocks, out)
-        return float(out[0]), float(out[1])
 
 
-class LGMDLanes(SharedWorkspace):
-    """The lane fields of an LGMD-family model for one frame size (:class:`LaneTaichiLGMDBackend`).
-
-    Every layer in :attr:`LAYERS` is a lane array (a vector ndarray, ``LANES`` float32 per element,
-    shape (H, NB); :func:`~cdnf_ti.kernels.common.lane_array`) in the lane
-    layout of :mod:`cdnf_ti.kernels.common`; the channels ``on``/``off`` have
-    :attr:`CHANNEL_BUFFERS` buffers (leading index). Each model has its own subclass, so its
-    fields (and compiled kernels) are shared by the models of that kind and size only.
-    """
-
-    LAYERS: ClassVar[tuple[str, ...]] = ("L", "P", "on", "off")
-    CHANNEL_BUFFERS: ClassVar[int] = 2
-
-    def __init__(self, shape: tuple[int, int]):
-        super().__init__(shape)
-        from ..kernels.common import MAX_STEPS, lane_array, lane_layout, sync_size
-
-        ti = dsl()
-        H, W = shape
-        _, nb = lane_layout(W)
-        for name in self.LAYERS:
-            lead = (self.CHANNEL_BUFFERS,) if name in ("on", "off") else ()
-            setattr(self, name, lane_array(*lead, H=H, NB=nb))
-        self.sync = ti.field(ti.i32, sync_size())  # phase counters of the persistent workers
-        self.rbuf = ti.field(ti.f32, (MAX_STEPS, 2))  # per-phase maxima (residuals, max |Ce|)
-        self.msum = ti.field(ti.f64, 2)  # a launch's float64 sum, and a flag
 
 
-class LaneTaichiLGMDBackend:
-    """The fast CPU backend of an LGMD-family model: its layers in lane arrays, kernels compiled with
-    explicit vector types (:func:`~cdnf_ti.taichi_runtime.vector_kernel`).
-
-    Same interface, equations and results as the model's ndarray backend
-    (:class:`TaichiLGMDBackend`); the kernels are the ``lanes_*`` ones of
-    :mod:`cdnf_ti.kernels.lgmd`. The fields are shared per model kind and frame size
-    (:attr:`workspace_type`); a backend whose state was evicted by another one of
-    the same kind and size gets it back from NumPy.
-
-    Parameters
-    ----------
-    params : the model's parameters
-    shape : (H, W)
-    dt : int
-        Frame interval (ms).
-    arch : str
-    """
-
-    name = "taichi"
-    workspace_type: ClassVar[type[LGMDLanes]]
-    #: Layers listed by :meth:`fields` besides ``P``, ``ON``, ``OFF``.
-    FIELD_LAYERS: ClassVar[tuple[str, ...]] = ()
-    #: Work items per row of the load kernel (element blocks), so both CPU threads get rows.
-    BLOCKS = 4
-
-    @staticmethod
-    def supports(shape: tuple[int, int], arch: str = "cpu") -> bool:
-        """The CPU, frames at least ``2 * LANES`` wide and two rows high."""
-        from ..kernels.common import LANES
-
-        return arch == "cpu" and shape[1] >= 2 * LANES and shape[0] >= 2
-
-    def __init__(self, params: Any, shape: tuple[int, int], dt: int, arch: str = "cpu"):
-        ensure_taichi(arch)
-        from ..kernels import lgmd as K
-
-        self.K = K
-        self.params = params
-        self.shape = tuple(shape)
-        self.W = int(shape[1])
-        self.dt = dt
-        self.nw = min(cpu_threads(), K.MAX_WORKERS)  # persistent workers per launch
-        self.ws = self.workspace_type.get(self.shape)
-        self.lock = self.ws.lock
-        self._saved: dict[str, np.ndarray] | None = None
-        self._load_out = np.zeros(1)  # lgmd_lanes_load's sum |P|
-        self._setup()
-        with self.lock:
-            self.reset()
-
-    def _setup(self) -> None:
-        """The model's constants."""
-
-    # -- workspace ownership -----------------------------------------------
-    def _acquire(self) -> LGMDLanes:
-        ws = self.ws
-        if ws.take(self) and self._saved is not None:
-            for name, x in self._saved.items():
-                getattr(ws, name).from_numpy(x)
-            self._saved = None
-        return ws
-
-    def _evict(self) -> None:
-        ws = self.ws
-        self._saved = {name: getattr(ws, name).to_numpy() for name in ws.LAYERS}
-        ws.owner = None
-
-    # -- backend interface ---------------------------------------------------
-    def reset(self) -> None:
-        ws = self._acquire()
-        for name in ws.LAYERS:
-            getattr(ws, name).fill(0.0)
-        self._reset_buffers()
-
-    def _reset_buffers(self) -> None:
-        """Back to the first buffers of the channels."""
-
-    def _load(self, grey: np.ndarray, first: bool, c_on: int, s_on: int, c_off: int, s_off: int,
-              feedback: tuple = ()) -> float:
-        """:func:`cdnf_ti.kernels.lgmd.lgmd_lanes_load`: channels ``s`` from ``c``; returns ``sum |P|``.
-
-        ``feedback``: F-LGMD's ``(on0, off0, q_on, q_off, qn1, qn2, qf1, qf2, wn, kn, wf, kf)``, else empty.
-        """
-        ws = self._acquire()
-        p = self.params
-        scale = 1.0 if grey.dtype == np.uint8 else 255.0
-        extra = feedback or (ws.P, ws.P, ws.P, ws.P) + (0.0,) * 8  # not read without feedback
-        out = self._load_out
-        out.fill(0.0)
-        self.K.lgmd_lanes_load(grey, ws.L, ws.P, ws.on, ws.off, c_on, s_on, c_off, s_off, scale, int(first),
-                               p.clip, p.dc, self.W, self.BLOCKS, bool(feedback), *extra, out)
-        return float(out[0])
-
-    def _channel_buffers(self) -> tuple[int, int]:
-        """Buffers of the ON and OFF channels that :meth:`fields` shows."""
-        raise NotImplementedError
-
-    def fields(self) -> dict[str, np.ndarray]:
-        ws = self._acquire()
-        b_on, b_off = self._channel_buffers()
-        out = {"P": ws.frame(ws.P.to_numpy()), "ON": ws.frame(ws.on.to_numpy()[b_on]),
-               "OFF": ws.frame(ws.off.to_numpy()[b_off])}
-        for name in self.FIELD_LAYERS:
-            out[name] = ws.frame(getattr(ws, name).to_numpy())
-        return out
 
 
-class PingPongLaneLGMDBackend(LaneTaichiLGMDBackend):
-    """A lane backend whose channels have two buffers: :meth:`load` writes the channels of the
-    new frame into the other buffer, and the layers make it current (:meth:`_next_buffers`). A
-    frame that FFI holds runs no layers, so its channels are dropped, as in the ndarray backend."""
-
-    def _reset_buffers(self) -> None:
-        self.c = 0  # the current ON/OFF buffers; load writes the other ones
-
-    def load(self, grey: np.ndarray, first: bool) -> float:
-        n = 1 - self.c
-        return self._load(grey, first, self.c, n, self.c, n)
-
-    def _next_buffers(self) -> tuple[int, int]:
-        """Make the other ON/OFF buffers current: ``(current, previous)`` indices."""
-        q, self.c = self.c, 1 - self.c
-        return self.c, q
-
-    def _channel_buffers(self) -> tuple[int, int]:
-        return self.c, self.c
 
 
-class _LGMD2Lanes(LGMDLanes):
-    LAYERS = ("L", "P", "on", "off", "I_on", "I_off", "S", "Ce", "G")
 
 
-class LaneTaichiLGMD2Backend(PingPongLaneLGMDBackend):
-    """LGMD2 layers on lane fields (see :class:`LGMD2`): a frame's layers in one launch."""
-
-    workspace_type = _LGMD2Lanes
-    FIELD_LAYERS = ("I_on", "I_off", "S", "Ce", "G")
-
-    def _setup(self) -> None:
-        p, dt = self.params, self.dt
-        self.an = tuple(lowpass_coefficient(dt, t) for t in p.tau_on)
-        self.af = tuple(lowpass_coefficient(dt, t) for t in p.tau_off)
-        self._layers_out = np.zeros(2)  # lgmd2_lanes_layers' sum G, max |Ce|
-
-    def layers(self, w_on: float, w_off: float) -> tuple[float, float]:
-        """Delayed inhibition, S, grouping (ON/OFF from :meth:`load`); returns ``(sum G, max |Ce|)``."""
-        ws = self._acquire()
-        p = self.params
-        c, q = self._next_buffers()
-        out = self._layers_out
-        out.fill(0.0)
-        self.K.lgmd2_lanes_layers(ws.on, ws.off, c, q, ws.I_on, ws.I_off, ws.S, ws.Ce, ws.G, w_on, w_off,
-                                  *p.k_on, *self.an, *p.k_off, *self.af, p.w_on_exc, p.w_off_exc, p.w_onoff,
-                                  p.delta_c, p.c_w, p.c_de, p.t_de, self.nw, ws.sync, ws.rbuf, ws.msum, self.W, out)
-        return float(out[0]), float(out[1])
 
 
 class LGMDFamily(Model):
@@ -492,25 +206,14 @@ class LGMDFamily(Model):
         count = np.asarray(trace.diagnostics["count"], dtype=np.float64)
         return [count >= v for v in values]
 
-    #: The model's backends, each built as ``(params, shape, dt)`` (Taichi: and ``arch``).
-    taichi_backend_type: ClassVar[type[TaichiLGMDBackend]]
+    #: The model's NumPy reference backend, built as ``(params, shape, dt)``.
     numpy_backend_type: ClassVar[type]
 
     def _setup(self) -> None:
         self.dt = frame_interval_ms(self.fps)
 
-    #: The fast CPU backend (lane fields), used where it :meth:`~LaneTaichiLGMDBackend.supports`
-    #: the frame; ``None``: the model has none.
-    lane_backend_type: ClassVar[type[LaneTaichiLGMDBackend] | None] = None
     #: Use the fast backend where it applies; ``False``: the generic kernels (same equations).
     fast: bool = True
-
-    def _taichi_backend(self, shape: tuple[int, int]) -> TaichiLGMDBackend | LaneTaichiLGMDBackend:
-        arch = ensure_taichi(self.arch)
-        lanes = self.lane_backend_type
-        if self.fast and lanes is not None and lanes.supports(shape, arch):
-            return lanes(self.params, shape, self.dt, self.arch)
-        return self.taichi_backend_type(self.params, shape, self.dt, self.arch)
 
     def _numpy_backend(self, shape: tuple[int, int]) -> Any:
         return self.numpy_backend_type(self.params, shape, self.dt)
@@ -572,8 +275,6 @@ class LGMD2(LGMDFamily):
     params_type = LGMD2Params
     description = "LGMD2 (Fu et al. 2020): biased ON/OFF, adaptive inhibition, SFA; equations from the authors' code"
 
-    taichi_backend_type = TaichiLGMD2Backend
-    lane_backend_type = LaneTaichiLGMD2Backend
     numpy_backend_type = NumpyLGMD2Backend
 
     def _step(self, t: int, grey: np.ndarray, sum_p: float) -> StepResult:

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from typing import Any, TypeVar
 
-from ..taichi_runtime import select_compiler
 from .base import Model
 
 #: Registered models by name, in registration order (``--models all`` runs them in this order).
@@ -64,8 +63,8 @@ def create_model(name: str, params: Any = None, *, compiler: str | None = None, 
     """Instantiate a registered model: ``create_model("cdnf", backend="numpy")``.
 
     ``compiler`` ("quadrants" or "taichi") names the process's kernel compiler
-    (:func:`cdnf_ti.taichi_runtime.select_compiler`); ``None`` keeps the default.
+    (:meth:`cdnf_ti.backends.Engine.select_compiler`); ``None`` keeps the default.
     """
     if compiler is not None and kwargs.get("backend", "taichi") == "taichi":
-        select_compiler(compiler)
+        Model._engine().select_compiler(compiler)
     return get_model_class(name)(params, **kwargs)

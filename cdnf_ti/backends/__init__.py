@@ -1,0 +1,61 @@
+"""The engine side of the models: compiled backends, built by a factory outside ``cdnf_ti.models``.
+
+A model (:class:`~cdnf_ti.models.base.Model`) states its equations' control flow and
+owns its scalar state; its per-pixel state and the kernels that update it live in a
+backend made here, by :data:`ENGINE` (installed as ``Model.engine`` by the ``cdnf_ti``
+package). Importing this package loads no compiler: the runtime starts when the first
+model with the ``"taichi"`` backend is made, and the kernels are built then
+(:func:`cdnf_ti.taichi_runtime.kernels`).
+
+A new model registers its backend factory with :func:`register_backend`.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable
+
+from .. import taichi_runtime
+from . import cdnf, lgmd, sdnf
+
+#: Backend factories by model name: ``factory(model, shape, arch) -> backend``.
+FACTORIES: dict[str, Callable[[Any, tuple[int, int], str], Any]] = {}
+
+
+def register_backend(name: str, factory: Callable[[Any, tuple[int, int], str], Any]) -> None:
+    """Make ``factory(model, shape, arch)`` build the compiled backend of the model named ``name``."""
+    FACTORIES[name] = factory
+
+
+class Engine:
+    """What :class:`~cdnf_ti.models.base.Model` asks of the compiler layer (``Model.engine``)."""
+
+    @staticmethod
+    def select_compiler(compiler: str) -> None:
+        """Name this process's kernel compiler before its runtime starts
+        (:func:`~cdnf_ti.taichi_runtime.select_compiler`)."""
+        taichi_runtime.select_compiler(compiler)
+
+    @staticmethod
+    def start(arch: str) -> str:
+        """Start the runtime on ``arch`` (once per process); returns the arch in use."""
+        return taichi_runtime.ensure_taichi(arch)
+
+    @staticmethod
+    def backend(model: Any, shape: tuple[int, int]) -> Any:
+        """The compiled backend of ``model`` for frames of ``shape`` (H, W)."""
+        # the model's own name, else the nearest base class's (a subclass that changes no equations)
+        names = [model.name] + [c.__dict__["name"] for c in type(model).__mro__ if "name" in c.__dict__]
+        factory = next((FACTORIES[n] for n in names if n in FACTORIES), None)
+        if factory is None:
+            raise NotImplementedError(f"{type(model).__name__} has no compiled backend "
+                                      "(cdnf_ti.backends.register_backend)")
+        arch = taichi_runtime.ensure_taichi(model.arch)
+        return factory(model, tuple(shape), arch)
+
+
+ENGINE = Engine()
+
+
+register_backend("cdnf", cdnf.make_backend)
+register_backend("sdnf", sdnf.make_backend)
+for _name in lgmd.FAMILY:
+    register_backend(_name, lgmd.make_backend)

@@ -1,0 +1,57 @@
+"""The lane backends' arrays: each backend's own state, and the scratch of the persistent workers."""
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+import numpy as np
+
+from ..kernels.common import MAX_STEPS
+from ..kernels.schedule import sync_size
+from ..taichi_runtime import dsl, lanes
+
+
+class Scratch:
+    """The per-launch scratch of the persistent-worker kernels, one set per process.
+
+    The phase counters ``sync`` (int32, :func:`~cdnf_ti.kernels.schedule.sync_size`), the
+    per-update residuals ``rbuf`` (float32, (MAX_STEPS, 2)) and a launch's float64 sum and flag
+    ``msum``. They are fields, which the kernels take as template arguments, so one set for
+    every lane backend of the process means one compiled instance per kernel and frame width:
+    a second model compiles nothing new. ``lock`` serialises the launches that use them
+    (:meth:`Model.step <cdnf_ti.models.base.Model.step>` holds it around each frame).
+    """
+
+    _one: Scratch | None = None
+    _make = threading.Lock()
+
+    def __init__(self):
+        ti = dsl()
+        self.sync = ti.field(ti.i32, sync_size())
+        self.rbuf = ti.field(ti.f32, (MAX_STEPS, 2))
+        self.msum = ti.field(ti.f64, 2)
+        self.lock = threading.RLock()
+
+    @classmethod
+    def get(cls) -> Scratch:
+        """The process's scratch, made on first use."""
+        with cls._make:
+            if cls._one is None:
+                cls._one = cls()
+            return cls._one
+
+
+class LaneState:
+    """A lane backend's own arrays for frames of ``shape`` (subclasses allocate them), with the
+    process's :class:`Scratch` (``sync``, ``rbuf``, ``msum``, ``lock``)."""
+
+    def __init__(self, shape: tuple[int, int]):
+        self.shape = tuple(shape)
+        scratch = Scratch.get()
+        self.sync, self.rbuf, self.msum, self.lock = scratch.sync, scratch.rbuf, scratch.msum, scratch.lock
+
+    def frame(self, x: np.ndarray) -> Any:
+        """The (H, W) frame columns of a lane field's ``to_numpy()`` array (H, NB, LANES)."""
+        LANES = lanes()
+        H, W = self.shape
+        return np.ascontiguousarray(x.reshape(H, -1)[:, LANES:LANES + W])

@@ -1,0 +1,43 @@
+"""The engine's structure (kernels/): one scheduler, stages bound per model, equations written once."""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+KERNELS = sorted((ROOT / "kernels").glob("*.py"))
+
+#: The persistent workers' primitives: only the scheduler may use them.
+PRIMITIVES = {"claim_rows", "finish_rows", "wait_phase", "gate", "converged", "reset_sync", "worker_start"}
+
+
+def _functions(path: Path):
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.FunctionDef):
+            yield node
+
+
+def _uses(fn: ast.FunctionDef) -> set[str]:
+    called = {n.func.id for n in ast.walk(fn) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)}
+    names = {n.id for n in ast.walk(fn) if isinstance(n, ast.Name)}
+    return (called & PRIMITIVES) | ({"WORKER_STRIDE"} & names)
+
+
+def test_only_the_scheduler_runs_workers_claims_rows_and_waits_on_phases():
+    users = [(p.name, fn.name) for p in KERNELS for fn in _functions(p)
+             if fn.name not in PRIMITIVES | {"build"} and _uses(fn)]
+    assert users and len(users) <= 2 and all(f == "schedule.py" for f, _ in users), users
+
+
+def test_every_lane_solve_is_one_scheduler_call_with_its_models_plan():
+    # the kernels that run persistent workers call run_workers once, with a plan built with the kernels
+    calls = {}
+    for p in KERNELS:
+        for fn in _functions(p):
+            n = sum(isinstance(c, ast.Call) and isinstance(c.func, ast.Name) and c.func.id == "run_workers"
+                    for c in ast.walk(fn))
+            if n and fn.name not in ("build", "lanes_summation_kernel"):  # factories around a kernel
+                calls[fn.name] = n
+    assert set(calls) == {"lanes_contrast_solve", "lanes_summation_solve", "flgmd_lanes_solve",
+                          "lgmd2_lanes_layers", "lgmd1_lanes_layers"}
+    assert set(calls.values()) == {1}
