@@ -423,7 +423,8 @@ def cpu_threads() -> int:
 # all (its pipeline leaves the SLP vectoriser off). Compiled with the option off, a vector stays
 # an LLVM vector type, which the code generator, which does see the host's AVX-512, lowers to
 # full-width registers: C-DNF's lane solves ran 1.8x (taichi) and 2.9-3.7x (quadrants) faster
-# per update (docs/ENGINE_NOTES.md). The option is part of the runtime's compile configuration,
+# per update (docs/PERFORMANCE.md, "Engine A/B and workarounds"). The option is part of the
+# runtime's compile configuration,
 # read while a kernel compiles (and part of the compile cache's key). Every kernel of cdnf_ti
 # compiles through :func:`vector_kernel` or :func:`scalar_kernel`, which set the option the
 # kernel needs under one lock and put back the value they found, so two threads compiling

@@ -48,7 +48,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
         steps, which the vectoriser leaves scalar; halving ``log2(n)`` times gives the same value
         (a maximum does not depend on the order) in vector instructions. It runs once per element
         in the solves' update loops, where the tree made a full-frame ON/OFF update 11 % and a
-        Summation update 23 % faster at 32 lanes (docs/ENGINE_NOTES.md).
+        Summation update 23 % faster at 32 lanes (docs/PERFORMANCE.md, "Engine A/B and workarounds").
         """
         b = v  # a copy: ti.func arguments are passed by value
         for width in ti.static(halvings(n)):

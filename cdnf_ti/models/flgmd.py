@@ -3,7 +3,7 @@
 **RECONSTRUCTION.** The equations of Chang et al., "A look into feedback
 neural computation upon collision selectivity" (Neural Networks 166:22-37,
 2023) are not publicly reachable. This model is built from the published
-mechanisms listed in ``shared/spec/BASELINES.md`` and is NOT the authors'
+mechanisms listed in ``docs/EQUATIONS.md`` and is NOT the authors'
 model; every value marked "own choice" below is ours, chosen before looking
 at any result and not tuned to the C-DNF paper's Table I.
 

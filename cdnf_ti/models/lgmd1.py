@@ -1,7 +1,7 @@
 """LGMD1 with ON/OFF pathways and spike frequency adaptation (Fu, Hu, Peng, Yue,
 Neural Networks 106:127-143, 2018).
 
-Equations and defaults: ``shared/spec/BASELINES.md``, gathered from the same
+Equations and defaults: ``docs/EQUATIONS.md``, gathered from the same
 authors' general LGMD code (``LGMDs.cs``). Differences from LGMD2
 (:mod:`cdnf_ti.models.lgmd2`):
 
@@ -33,7 +33,7 @@ from .registry import register_model
 
 @dataclass(frozen=True)
 class LGMD1Params(ModelParams):
-    """LGMD1 parameters (defaults: BASELINES.md / the authors' ``LGMDs.cs``).
+    """LGMD1 parameters (defaults: docs/EQUATIONS.md / the authors' ``LGMDs.cs``).
 
     Attributes
     ----------

@@ -1,6 +1,6 @@
 """LGMD2 (Fu, Hu, Peng, Rind, Yue, IEEE Trans. Cybernetics 50(12):5074-5088, 2020).
 
-Equations and defaults: ``shared/spec/BASELINES.md``, gathered from the
+Equations and defaults: ``docs/EQUATIONS.md``, gathered from the
 authors' public C# supplement (``lgmd2OpenSource.cs``). Per frame, with
 ``dt = 1000 // fps`` ms (integer: 33 at 30 fps) and grey levels in 0..255:
 
@@ -83,7 +83,7 @@ def spike_count(kh: float, t_sp: float, c_sp: float) -> int:
 
 @dataclass(frozen=True)
 class LGMD2Params(ModelParams):
-    """LGMD2 parameters (defaults: BASELINES.md / the authors' C# supplement).
+    """LGMD2 parameters (defaults: docs/EQUATIONS.md / the authors' C# supplement).
 
     Attributes
     ----------

@@ -3,7 +3,7 @@
 **RECONSTRUCTION.** The equations of the single-field DNF model (Qin et al.,
 Neural Networks 2024, doi 10.1016/j.neunet.2024.106502) are not publicly
 reachable. This model is built from the published mechanisms listed in
-``shared/spec/BASELINES.md`` and is NOT the authors' model. Values marked
+``docs/EQUATIONS.md`` and is NOT the authors' model. Values marked
 "own choice" are ours, fixed before looking at any result and not tuned to
 the C-DNF paper's Table I.
 
