@@ -24,6 +24,8 @@ The option scheme: one meaning per name in every subcommand (the README's "Optio
                             ``generate --out FILE.avi``, ``live --record FILE.mp4``)
 ``--workers N``, ``--scheduler ADDRESS``  parallel batch runs
 ``--no-progress``           hide progress bars
+``--sensor-size WxH``, ``--bin-ms``, ``--event-threshold C``  event recordings (``cdnf_ti.events.cli``)
+``--record FILE.mp4``, ``--jsonl``, ``--udp``  the live loop's outputs (``cdnf_ti.live``)
 ==========================  =======================================================================
 
 Each command adds the options it has with the helpers here (:func:`add_model_options`,

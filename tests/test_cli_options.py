@@ -275,6 +275,21 @@ def test_a_missing_video_is_still_an_error_without_skip_missing(dataset, tmp_pat
     assert "ghost" in capsys.readouterr().err
 
 
+def test_sweep_reads_clips_at_the_given_fps_and_skips_missing_videos(dataset, tmp_path, capsys):
+    import json
+
+    labels = tmp_path / "labels.csv"
+    labels.write_text((dataset / "labels.csv").read_text() + 'ghost,collision,3,5,5,10,"no video"\n')
+    out = tmp_path / "o"
+    assert main(["experiment", "sweep", str(dataset), "--labels", str(labels), "--skip-missing", "--fps", "25",
+                 "--param", "h=0.1", "--backend", "numpy", "--out", str(out), "--workers", "0", "--no-progress",
+                 "--no-figures", "--no-html"]) == 0
+    assert "ghost" in capsys.readouterr().err
+    metas = [json.loads(p.read_text()) for p in out.rglob("traces/clean/*.json")]
+    assert sorted(m["clip"] for m in metas) == ["dark_looming", "light_translating"]
+    assert {float(m["fps"]) for m in metas} == {25.0}
+
+
 def test_the_task_log_counts_the_failures_that_the_results_report(dataset, tmp_path, capsys):
     ds = tmp_path / "ds"
     ds.mkdir()

@@ -81,14 +81,13 @@ def _add_dataset_options(ap: argparse.ArgumentParser, rain_default: str, one_mod
                 a.help = "the one model whose parameters are swept (default: cdnf)"
     else:
         add_model_options(ap, default_models="cdnf" if rain_default == "off" else "all")
-    if not one_model:  # (the sweep reads clips as they are and needs every labelled clip)
+    if not one_model:  # (the sweep sets its parameters with its own grid --param)
         add_param_options(ap)
-        add_input_options(ap)
+    add_input_options(ap)
     add_rain_options(ap, default=rain_default, what="each clip", drops=not one_model)
-    if not one_model:
-        ap.add_argument("--skip-missing", action="store_true",
-                        help="run the clips whose video exists and leave out label rows naming a missing video "
-                             "(a note lists them; default: a missing video is an error and nothing runs)")
+    ap.add_argument("--skip-missing", action="store_true",
+                    help="run the clips whose video exists and leave out label rows naming a missing video "
+                         "(a note lists them; default: a missing video is an error and nothing runs)")
     ap.add_argument("--pad-before", type=_nonneg_int, default=0, metavar="N",
                     help="frames of tolerance before each window start (default 0)")
     ap.add_argument("--pad-after", type=_nonneg_int, default=0, metavar="N",
@@ -172,12 +171,14 @@ def _param_sweep(args) -> int:
     folder = Path(args.folder)
     if not folder.is_dir():
         raise InputError(folder, "dataset folder not found")
+    _skip_missing(args, folder)
     run = run_param_sweep(folder, args.labels, Path(args.out), models[0], args.param,
                           rain=RAIN_ENGINE_WORD[args.rain], padding=Padding(args.pad_before, args.pad_after),
                           seed=rain_seed_of(args), folds=args.folds,
                           workers=args.workers, scheduler=args.scheduler, backend=args.backend, arch=args.arch,
                           progress=not args.no_progress, figures=not args.no_figures, downscale=args.downscale,
-                          html=not args.no_html)
+                          html=not args.no_html, fps=args.fps, color_order=args.color_order,
+                          skip_missing=args.skip_missing)
     print((Path(args.out) / "param_sweep.md").read_text(encoding="utf-8"))
     print(f"{len(run.settings)} settings x {len(run.conditions)} conditions: {run.ran} tasks run now, "
           f"{run.skipped} reused; results in {args.out}/", file=sys.stderr)

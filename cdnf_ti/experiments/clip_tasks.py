@@ -302,6 +302,8 @@ class SweepTask:
     backend, arch : str
     downscale : float
         Frames are resized by this factor (1 = native size).
+    fps, color_order :
+        How the clip is read (``--fps``, ``--color-order``).
     """
 
     clip: str
@@ -315,13 +317,15 @@ class SweepTask:
     backend: str = "taichi"
     arch: str = "cpu"
     downscale: float = 1.0
+    fps: float | None = None
+    color_order: str = "bgr"
 
     @property
     def clip_task(self) -> ClipTask:
         """The same work as a :class:`ClipTask` of one model under ``OUT/settings/<key>``."""
         return ClipTask(self.clip, self.path, self.condition, (self.model,), str(setting_folder(self.out, self.key)),
-                        self.seed, self.backend, self.arch, None, setting=tuple(self.setting),
-                        downscale=float(self.downscale), key=self.key)
+                        self.seed, self.backend, self.arch, None, fps=self.fps, color_order=self.color_order,
+                        setting=tuple(self.setting), downscale=float(self.downscale), key=self.key)
 
 
 def setting_folder(out: str | os.PathLike, key: str) -> Path:

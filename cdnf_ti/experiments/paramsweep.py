@@ -52,7 +52,7 @@ from .clip_tasks import (
     task_fingerprint as task_fingerprint,
 )
 from .clipscores import choose_level, correctness_matrix, cross_validated_accuracy, roc
-from .labels import read_labels, validate_dataset
+from .labels import drop_missing, read_labels, validate_dataset
 from .layout import RAIN_CHOICES, trace_path
 from .nested import sweep_nested_cv
 from .scoring import Padding, score_clip
@@ -174,7 +174,8 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
                     model: str, param_specs: Sequence[str], rain: str = "none", padding=None, seed: int = 0,
                     folds: int = 0, workers: int | None = None, scheduler: Any = None, backend: str = "taichi",
                     arch: str = "cpu", progress: bool = True, figures: bool = True, downscale: float = 1.0,
-                    html: bool = True) -> ParamSweepRun:
+                    html: bool = True, fps: float | None = None, color_order: str = "bgr",
+                    skip_missing: bool = False) -> ParamSweepRun:
     """Run the grid over every labelled clip and write the sweep reports.
 
     Parameters
@@ -196,6 +197,10 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
     progress, figures, html : bool
     downscale : float
         Resize factor of every frame (in (0, 1]; 1 = native).
+    fps, color_order : optional
+        How clips are read (``--fps``, ``--color-order``).
+    skip_missing : bool
+        Leave out labelled clips whose video is missing (a note lists them); by default an error.
 
     Raises
     ------
@@ -216,6 +221,8 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
         raise InputError(folder, "dataset folder not found")
     labels_path = Path(labels_path) if labels_path is not None else folder / "labels.csv"
     labels = read_labels(labels_path)
+    if skip_missing:
+        labels, _ = drop_missing(labels, folder)
     files = validate_dataset(labels, folder, labels_path)
     conditions = list(RAIN_CHOICES[rain])
     out = Path(out)
@@ -225,7 +232,7 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
                                           "downscale": downscale, "dataset": str(folder),
                                           "labels": str(labels_path)})
     tasks = [SweepTask(lab.clip, str(Path(files[lab.clip]).resolve()), name, tuple(s.items()), setting_key(s),
-                       cond, str(out), seed, backend, arch, float(downscale))
+                       cond, str(out), seed, backend, arch, float(downscale), fps, color_order)
              for s in settings for cond in conditions for lab in labels]
     done = run_sweep(tasks, workers=workers, scheduler=scheduler, arch=arch,
                      progress=f"sweep {name}" if progress else False)
