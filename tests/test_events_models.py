@@ -1,9 +1,10 @@
 """Event bins through the models' ON/OFF input stage (``Model.step_on_off``, the CLI on event files).
 
-C-DNF takes a bin as the net luminance change ``P = p_on - p_off`` of its contrast input stage
-(the engine's kernels read one signed ``P``); its compiled paths are checked against the NumPy
-float64 reference on bins with mixed ON and OFF pixels, and its Table I row is checked through
-the CLI on events of the basic stimuli made by an emulator other than cdnf_ti's.
+Every model takes a bin as the net luminance change ``P = p_on - p_off`` of its input stage
+(the engine's kernels read one signed ``P``). The compiled paths of all five models are checked
+against the NumPy float64 references on bins with mixed ON and OFF pixels, and C-DNF's Table I
+row (``cdnf_ti.paper.TABLE1``) is checked through the CLI on events of the six basic stimuli
+made by an emulator other than cdnf_ti's.
 """
 from __future__ import annotations
 
@@ -16,10 +17,13 @@ from other_emulator import other_emulate
 from cdnf_ti import CDNF
 from cdnf_ti.backends.cdnf import LaneTaichiCDNFBackend, TaichiCDNFBackend
 from cdnf_ti.errors import UserError
+from cdnf_ti.events import open_event_source
 from cdnf_ti.frames import iter_grey
 from cdnf_ti.inputs import resolve_input
 from cdnf_ti.models import create_model
+from cdnf_ti.paper import TABLE1
 from cdnf_ti.run import main
+from cdnf_ti.stimuli.basic import BASIC_STIMULI
 from cdnf_ti.taichi_runtime import lanes
 
 SIZE = 128  # the basic stimuli at 128 px keep C-DNF's Table I row on frames
@@ -104,10 +108,10 @@ def test_a_model_without_an_event_input_stage_says_so():
 
 @pytest.fixture(scope="module")
 def recordings(tmp_path_factory):
-    """Per threshold, events (lin-log emulator) of the looming and translating stimuli as .npy files."""
+    """Per threshold, events (lin-log emulator) of the six basic stimuli as .npy files."""
     folder = tmp_path_factory.mktemp("events")
     frames = {}
-    for name in ("dark_looming", "light_looming", "dark_translating"):
+    for name in BASIC_STIMULI:
         src = resolve_input(f"stim:{name}?size={SIZE}")
         frames[name] = (src.fps, list(iter_grey(src)))
 
@@ -131,9 +135,12 @@ def test_cdnf_keeps_its_table_i_row_on_event_recordings_through_the_cli(recordin
     code = main([*paths.values(), "--model", "cdnf", "--event-threshold", str(threshold), "--bin-ms", "33.333",
                  "--sensor-size", f"{SIZE}x{SIZE}", "--out", str(out), "--no-progress"])
     assert code == 0
-    for name in paths:
+    for name, path in paths.items():
         with open(out / f"{name}_{threshold:g}.cdnf.csv", newline="") as f:
             rows = list(csv.DictReader(f))
-        assert len(rows) == n_frames[name] - 1  # one row per bin: one bin per frame interval
+        n_bins = sum(1 for _ in open_event_source(path, (SIZE, SIZE), 33.333).counts())
+        assert len(rows) == n_bins  # one row per bin
+        if "receding" not in name:  # events up to the last frame: one bin per frame interval
+            assert n_bins == n_frames[name] - 1
         alerted = any(r["spike"] == "1" for r in rows)
-        assert alerted == name.endswith("looming"), name
+        assert alerted == (TABLE1["cdnf"][name] == 1), name
