@@ -122,6 +122,12 @@ class _NumpyLGMDBase:
         self.L = g
         return float(np.abs(self.P).sum())
 
+    def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> float:
+        """Take an event bin: ``P = 255 (p_on - p_off)`` grey levels (H, W each, in [0, 1]), the
+        net change in the bin; returns ``sum |P|``."""
+        self.P = 255.0 * (np.asarray(p_on, np.float64) - np.asarray(p_off, np.float64))
+        return float(np.abs(self.P).sum())
+
     def _on_off(self, clip: float, dc: float) -> None:
         self.ON_prev, self.OFF_prev = self.ON, self.OFF
         self.ON = half_wave_on(self.P, self.ON_prev, clip, dc)
@@ -296,6 +302,13 @@ class NumpySDNFBackend:
             g /= 255.0
         self.P = np.zeros(self.shape) if first else g - self.L
         self.L = g
+        self.E = (np.abs(self.P) >= self.params.t_b).astype(np.float64)
+        return float(self.E.mean())
+
+    def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> float:
+        """Take an event bin: ``P = p_on - p_off`` (H, W each, in [0, 1]), ``E = [|P| >= T_b]``;
+        returns the active fraction ``rho``."""
+        self.P = np.asarray(p_on, np.float64) - np.asarray(p_off, np.float64)
         self.E = (np.abs(self.P) >= self.params.t_b).astype(np.float64)
         return float(self.E.mean())
 

@@ -273,8 +273,8 @@ def open_source(path: str | os.PathLike, fps: float | None = None, color_order: 
     if p.stat().st_size == 0:
         raise InputError(path, "file is empty")
     if is_event_file(p):
-        raise InputError(path, "is an event-camera recording, not frames: the models take events through their "
-                               "ON/OFF input stage (README, 'Event cameras'); 'python -m cdnf_ti.run events --info' "
+        raise InputError(path, "is an event-camera recording, not frames: 'python -m cdnf_ti.run FILE' runs the "
+                               "models on it (README, 'Event cameras'); 'python -m cdnf_ti.run events --info' "
                                "summarises it")
     if p.suffix.lower() == ".npy":
         return open_npy(p, fps, color_order)

@@ -119,6 +119,15 @@ class NumpyCDNFBackend(RestingFields):
             self.u_on = local_start(np.maximum(self.P, 0.0), self.start[0])
             self.u_off = local_start(np.maximum(-self.P, 0.0), self.start[0])
 
+    def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> None:
+        """Take an event bin: ``P = p_on - p_off`` (H, W each, in [0, 1]), the net luminance change
+        in the bin; the photoreceptors' ``L`` is not used. With the local start, ``u_on``/``u_off``
+        start from ``[P]+``/``[-P]+`` as for a frame."""
+        self.P = np.asarray(p_on, np.float64) - np.asarray(p_off, np.float64)
+        if self.start is not None:
+            self.u_on = local_start(np.maximum(self.P, 0.0), self.start[0])
+            self.u_off = local_start(np.maximum(-self.P, 0.0), self.start[0])
+
     def clear_input(self) -> None:
         self.P = np.zeros(self.shape)
 

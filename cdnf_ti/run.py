@@ -61,6 +61,9 @@ from .cli_common import (
     unique_names as unique_names,
 )
 from .errors import InputError, UserError
+from .events.cli import add_event_options
+from .events.readers import is_event_file
+from .events.source import EventSource, open_event_source
 from .experiments.parallel import exit_on_second_interrupt, stop_all_pools
 from .frames import IMAGE_EXTENSIONS, iter_grey
 from .inputs import resolve_input
@@ -95,12 +98,14 @@ def _videos_parser() -> argparse.ArgumentParser:
                     f"Subcommands: {', '.join(SUBCOMMANDS)} (e.g. 'python -m cdnf_ti.run demo --help').",
     )
     ap.add_argument("inputs", nargs="+", metavar="VIDEO",
-                    help="video file, folder of images, .npy array, or a generated stimulus "
+                    help="video file, folder of images, .npy array, event recording (README, 'Event cameras'), or a "
+                         "generated stimulus "
                          "'stim:NAME[?coherence=C&seed=S&size=N...]' (see cdnf_ti.inputs)")
     add_output_option(ap)
     add_model_options(ap)
     add_param_options(ap)
     add_input_options(ap)
+    add_event_options(ap)
     add_rain_options(ap, default="off")
     add_seed_options(ap, rain=True)
     ap.add_argument("--no-progress", action="store_true", help="hide progress bars")
@@ -143,7 +148,12 @@ def _run_videos(args, models: list[str], params: dict, out: Path, write_text) ->
     order: list[int] = []
     for index, path in enumerate(args.inputs):  # open every input first: bad ones are reported before any work
         try:
-            src = resolve_input(path, fps=args.fps, color_order=args.color_order)
+            if is_event_file(path):
+                if rain_params is not None:
+                    raise InputError(path, "is an event recording; --rain applies to frames only")
+                src = open_event_source(path, args.sensor_size, args.bin_ms)
+            else:
+                src = resolve_input(path, fps=args.fps, color_order=args.color_order)
             check_frame_size(*src.shape, n_models=len(models), what=str(path))
             if rain_params is not None:
                 check_drops(args.rain_drops, src.shape, what="--rain-drops")
@@ -190,7 +200,8 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", NotConvergedWarning)  # reported per line below
-            frames = iter_grey(src)
+            events = isinstance(src, EventSource)
+            frames = src.contrast(args.event_threshold) if events else iter_grey(src)
             if rain_params is not None:
                 rain = RainyFrames(frames, rain_params, seed=rain_seed)
                 frames = iter(rain)
@@ -200,6 +211,9 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         return [_error_row(index, path, clip, ",".join(models), condition, e.problem)], 0
+    if events:
+        for problem in src.report.problems():
+            print(f"warning: {path}: {problem}", file=sys.stderr)
     rows = []
     ran = 0
     for name, model, trace, err in zip(models, instances, traces, errors):

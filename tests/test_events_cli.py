@@ -1,11 +1,13 @@
 """``python -m cdnf_ti.run events``: emulate videos into event files, summarise recordings, bad inputs."""
 from __future__ import annotations
 
+import csv
+
 import numpy as np
 import pytest
 from event_encoders import encode_evt3, random_events, raw_header
 
-from cdnf_ti.events import open_events
+from cdnf_ti.events import open_event_source, open_events
 from cdnf_ti.run import main
 
 STIM = "stim:dark_looming?size=48&duration=0.5"
@@ -67,12 +69,27 @@ def test_info_warns_of_events_outside_the_given_sensor_size(tmp_path, capsys):
     assert f"warning: {f}: " in err and "outside the 32x48 sensor" in err
 
 
-def test_running_a_model_on_an_event_file_names_the_file_and_the_way(tmp_path, capsys):
+def test_running_the_models_on_an_event_file_gives_one_trace_row_per_bin_and_its_warnings(tmp_path, capsys):
+    f = tmp_path / "ev.npy"
+    np.save(f, random_events(300, (64, 48), seed=2, duration_us=400_000))
+    out = tmp_path / "out"
+    assert main([str(f), "--model", "all", "--sensor-size", "32x48", "--out", str(out), "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert "error:" not in err
+    assert f"warning: {f}: " in err and "outside the 32x48 sensor" in err
+    n_bins = sum(1 for _ in open_event_source(f, (32, 48)).counts())
+    for name in ("cdnf", "sdnf", "lgmd1", "lgmd2", "flgmd_onn"):
+        with open(out / f"ev.{name}.csv", newline="") as fh:
+            assert len(list(csv.DictReader(fh))) == n_bins, name
+
+
+def test_render_takes_frames_only_and_points_to_run_for_an_event_file(tmp_path, capsys):
     f = tmp_path / "ev.npy"
     np.save(f, random_events(100, (64, 48), seed=2))
-    assert main([str(f), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    assert main(["render", str(f), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert err.count("error:") == 1 and f"error: {f}: is an event-camera recording" in err
+    assert "'python -m cdnf_ti.run FILE' runs the models on it" in err
 
 
 def test_info_on_a_folder_reports_every_recording_in_it(tmp_path, capsys):

@@ -14,6 +14,7 @@ from ..kernels.schedule import MAX_WORKERS
 from ..params import THETA_SCALE, CDNFParams, contrast_kernel, dog_profiles, resting_levels
 from ..solver import RESTART_GROWTH, cdnf_local_starts
 from ..taichi_runtime import cpu_threads, dsl, ensure_taichi, kernels, lanes
+from .events import load_net_contrast
 from .workspace import LaneState
 
 
@@ -98,6 +99,12 @@ class TaichiCDNFBackend:
         scale = 1.0 / 255.0 if grey.dtype == np.uint8 else 1.0
         self.K.load_frame(grey, self.L, self.P, scale, int(first), self.blocks, self.u_on[self.c],
                           self.u_off[self.c], self._start, self.local)
+
+    def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> None:
+        """Take an event bin (H, W each, contrast in [0, 1]): ``P = p_on - p_off``, the net signed
+        contrast the kernels' ON/OFF input stage reads (a pixel with both polarities in one bin
+        gets their difference); returns what :meth:`load` returns."""
+        return load_net_contrast(self, p_on, p_off)
 
     def clear_input(self) -> None:
         self.K.fill(self.P, 0.0)
@@ -334,6 +341,12 @@ class LaneTaichiCDNFBackend:
             ws = self.ws
             self.K.lanes_load_frame(grey, ws.L, ws.P, scale, first, self.W, ws.pend["c"], self.c, ws.u_on, ws.u_off,
                                     self._start, self.local, self.mode)
+
+    def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> None:
+        """Take an event bin (H, W each, contrast in [0, 1]): ``P = p_on - p_off``, the net signed
+        contrast the kernels' ON/OFF input stage reads (a pixel with both polarities in one bin
+        gets their difference); returns what :meth:`load` returns."""
+        return load_net_contrast(self, p_on, p_off)
 
     def clear_input(self) -> None:
         ws = self._acquire()

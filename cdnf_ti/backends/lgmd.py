@@ -15,6 +15,7 @@ from ..kernels.schedule import MAX_WORKERS
 from ..models.lgmd2 import lowpass_coefficient
 from ..solver import RESTART_GROWTH
 from ..taichi_runtime import cpu_threads, dsl, ensure_taichi, kernels, lanes
+from .events import load_net_contrast
 from .workspace import LaneState
 
 
@@ -83,6 +84,11 @@ class TaichiLGMDBackend:
         self.K.load_frame(grey, self.L, self.P, *self._channel_targets(), scale, int(first), p.clip, p.dc,
                           self.blocks, out)
         return float(out[0])
+
+    def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> float:
+        """Take an event bin (H, W each, contrast in [0, 1]) as the net change ``P = 255 (p_on - p_off)``
+        grey levels; returns what :meth:`load` returns (``sum |P|``)."""
+        return load_net_contrast(self, p_on, p_off)
 
     def _channel_targets(self) -> tuple[Any, Any, Any, Any]:
         """``(ON, OFF, ON(t-1), OFF(t-1))`` buffers of :meth:`load`: the next ping-pong buffers,
@@ -209,6 +215,11 @@ class LaneTaichiLGMDBackend:
         for name in ws.LAYERS:
             getattr(ws, name).fill(0.0)
         self._reset_buffers()
+
+    def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> float:
+        """Take an event bin (H, W each, contrast in [0, 1]) as the net change ``P = 255 (p_on - p_off)``
+        grey levels; returns what :meth:`load` returns (``sum |P|``)."""
+        return load_net_contrast(self, p_on, p_off)
 
     def _reset_buffers(self) -> None:
         """Back to the first buffers of the channels."""

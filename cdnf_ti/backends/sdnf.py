@@ -7,6 +7,7 @@ from ..kernels import common
 from ..models.sdnf import SDNFParams
 from ..params import THETA_SCALE
 from ..taichi_runtime import dsl, ensure_taichi, kernels
+from .events import load_net_contrast
 
 
 class TaichiSDNFBackend:
@@ -50,6 +51,11 @@ class TaichiSDNFBackend:
         out.fill(0.0)
         self.K.load_binary(grey, self.L, self.P, self.E, scale, int(first), self.params.t_b, self.blocks, out)
         return float(out[0]) / (self.shape[0] * self.shape[1])
+
+    def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> float:
+        """Take an event bin (H, W each, in [0, 1]) as the net change ``P = p_on - p_off``:
+        ``E = [|P| >= T_b]``; returns what :meth:`load` returns (the active fraction)."""
+        return load_net_contrast(self, p_on, p_off)
 
     def update(self, b_t: float) -> float:
         p = self.params

@@ -4,6 +4,7 @@ from __future__ import annotations
 import os
 import sys
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Iterator
 
 import numpy as np
@@ -42,6 +43,16 @@ class EventSource:
     @property
     def path(self) -> str:
         return self.events.path
+
+    @property
+    def name(self) -> str:
+        """The recording's name (file stem), as a video's."""
+        return Path(self.path).stem
+
+    @property
+    def n_frames(self) -> None:
+        """Unknown until the recording is read (the bins stream); ``None``, as for a live source."""
+        return None
 
     @property
     def shape(self) -> tuple[int, int]:

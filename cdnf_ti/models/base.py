@@ -20,6 +20,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..atomic import atomic_write_text
+from ..errors import UserError
 from ..frames import to_grey
 
 
@@ -266,6 +267,8 @@ class Model:
     engine: ClassVar[Any] = None
 
     #: Threshold sweep (:class:`Sweepable`): defaults; a model opts in by defining ``sweep_alerts``.
+    #: whether the model has an ON/OFF input stage for event bins (:meth:`step_on_off`)
+    takes_events: ClassVar[bool] = False
     sweep_parameter: ClassVar[str] = "threshold"
     sweep_values: ClassVar[Sequence[float] | None] = None
 
@@ -316,6 +319,38 @@ class Model:
             loaded = self._be.load(grey, t == 0)
             self._t += 1
             result = self._step(t, grey, loaded)
+        if not result.converged:
+            self._unconverged += 1
+        return result
+
+    def step_on_off(self, p_on: np.ndarray, p_off: np.ndarray) -> StepResult:
+        """Process one bin of an event camera: the ON/OFF contrast ``p_on``, ``p_off`` (H, W), in [0, 1].
+
+        The bin goes straight into the model's ON/OFF input stage (its backend's
+        ``load_on_off``) instead of the photoreceptors' luminance change. Every bin
+        is a full step, bin 0 included (an event bin needs no previous frame).
+
+        Raises
+        ------
+        UserError
+            The model has no ON/OFF input stage for events.
+        """
+        p_on = np.asarray(p_on)
+        p_off = np.asarray(p_off)
+        if p_on.ndim != 2 or p_on.shape != p_off.shape:
+            raise ValueError(f"p_on and p_off must be (H, W) arrays of one shape, got {p_on.shape} and {p_off.shape}")
+        if not self.takes_events:
+            raise UserError(f"model {self.name} does not take event input yet")
+        if self._be is None:
+            self._make_backend(p_on.shape, np.dtype(np.float32))
+        elif p_on.shape != self._be.shape:
+            raise ValueError(f"bin {self._t} is {p_on.shape[1]}x{p_on.shape[0]} but this model runs at "
+                             f"{self._be.shape[1]}x{self._be.shape[0]}; call reset() on a new model")
+        with self._backend_lock():
+            t = self._t
+            loaded = self._be.load_on_off(p_on, p_off, t == 0)
+            self._t += 1
+            result = self._step(t, None, loaded)
         if not result.converged:
             self._unconverged += 1
         return result
@@ -387,8 +422,9 @@ class Model:
         ----------
         t : int
             Frame index; ``t == 0`` is the first frame since :meth:`reset`.
-        grey : ndarray, shape (H, W)
-            The grey frame (already loaded into ``self._be``).
+        grey : ndarray, shape (H, W), or None
+            The grey frame (already loaded into ``self._be``); ``None`` for an event bin
+            (:meth:`step_on_off`), which is a full step even at ``t == 0``.
         loaded : Any
             What the backend's ``load`` returned for it.
         """
@@ -428,8 +464,8 @@ def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bo
     Parameters
     ----------
     models : list of Model
-    frames : iterable of ndarray
-        Frame stream (consumed lazily).
+    frames : iterable of ndarray or of (p_on, p_off)
+        Frame stream (consumed lazily); a tuple item is an event bin (:meth:`Model.step_on_off`).
     progress : bool or str
         Show a tqdm progress bar (a string is used as its label).
     total : int, optional
@@ -467,7 +503,7 @@ def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bo
                     continue
                 t0 = time.perf_counter()
                 try:
-                    steps[k].append(m.step(frame))
+                    steps[k].append(m.step_on_off(*frame) if isinstance(frame, tuple) else m.step(frame))
                 except Exception as e:
                     if errors is None:
                         raise

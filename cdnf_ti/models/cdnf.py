@@ -61,6 +61,7 @@ class CDNF(Model):
     #: Use the lane-vectorised kernels where the frame allows (False: the generic ndarray kernels).
     fast: bool = True
 
+    takes_events = True
     #: Threshold sweep (:class:`~cdnf_ti.models.base.Sweepable`): epsilon from 0 to 0.02.
     sweep_parameter = "epsilon (alert I_v > 0.5 + value)"
     sweep_values = tuple(float(x) for x in np.round(np.linspace(0.0, 0.02, 21), 6))
@@ -107,7 +108,7 @@ class CDNF(Model):
                                iterate_many=getattr(be, "summation_iterate_many", None), **kw)
         return rc, rs
 
-    def _step(self, t: int, grey: np.ndarray, loaded: None) -> StepResult:
+    def _step(self, t: int, grey: np.ndarray | None, loaded: None) -> StepResult:
         """The equations of one frame; see :class:`StepResult`.
 
         Diagnostics: ``iterations_on/off/sum``, ``residual_on/off/sum`` (the plain map's
@@ -115,7 +116,7 @@ class CDNF(Model):
         the Summation solve) and ``restarts`` (Chebyshev safeguard restarts/fallbacks).
         """
         be = self._be
-        if t == 0:
+        if t == 0 and grey is not None:  # an event bin (grey None) is a full step even at t == 0
             be.restore_rest()
             diag = dict(iterations_on=0, iterations_off=0, iterations_sum=0,
                         residual_on=0.0, residual_off=0.0, residual_sum=0.0, damping_sum=1.0, restarts=0)

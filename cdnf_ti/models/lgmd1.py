@@ -133,11 +133,11 @@ class LGMD1(LGMDFamily):
 
     numpy_backend_type = NumpyLGMD1Backend
 
-    def _step(self, t: int, grey: np.ndarray, sum_p: float) -> StepResult:
+    def _step(self, t: int, grey: np.ndarray | None, sum_p: float) -> StepResult:
         p = self.params
-        if t == 0:
+        if t == 0 and grey is not None:  # an event bin (grey None) is a full step even at t == 0
             return StepResult(t, 0.5, False, True, self._diag0())
-        n_cells = grey.shape[0] * grey.shape[1]
+        n_cells = self._be.shape[0] * self._be.shape[1]
         self._track_pm(sum_p, n_cells, p.tau_ffi)
         held = self.pm >= p.t_ffi
         extra: dict[str, float] = self._held_diag() if held else {}

@@ -208,6 +208,7 @@ class LGMDFamily(Model):
 
     #: The model's NumPy reference backend, built as ``(params, shape, dt)``.
     numpy_backend_type: ClassVar[type]
+    takes_events = True
 
     def _setup(self) -> None:
         self.dt = frame_interval_ms(self.fps)
@@ -277,14 +278,14 @@ class LGMD2(LGMDFamily):
 
     numpy_backend_type = NumpyLGMD2Backend
 
-    def _step(self, t: int, grey: np.ndarray, sum_p: float) -> StepResult:
+    def _step(self, t: int, grey: np.ndarray | None, sum_p: float) -> StepResult:
         p = self.params
         be = self._be
-        if t == 0:
+        if t == 0 and grey is not None:  # an event bin (grey None) is a full step even at t == 0
             return StepResult(t, 0.5, False, True, dict(Kh=p.kh_floor, n=0, count=0, PM=0.0,
                                                         w_on=p.w_on_base, w_off=p.w_off_base,
                                                         sum_G=0.0, max_Ce=0.0))
-        n_cells = grey.shape[0] * grey.shape[1]
+        n_cells = self._be.shape[0] * self._be.shape[1]
         self._track_pm(sum_p, n_cells, p.tau_pm)
         w_on = max(self.pm / p.t_pm, p.w_on_base)
         w_off = max(self.pm / p.t_pm, p.w_off_base)

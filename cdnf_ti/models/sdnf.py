@@ -217,10 +217,12 @@ class SDNF(Model):
             result.append(alerts)
         return result
 
+    takes_events = True
+
     def _numpy_backend(self, shape: tuple[int, int]) -> NumpySDNFBackend:
         return NumpySDNFBackend(self.params, shape)
 
-    def _step(self, t: int, grey: np.ndarray, rho: float) -> StepResult:
+    def _step(self, t: int, grey: np.ndarray | None, rho: float) -> StepResult:
         p = self.params
         b_t = p.B * (1.0 + p.kappa * rho)
         act = self._be.update(b_t)

@@ -1,0 +1,146 @@
+"""Event bins through the models' ON/OFF input stage (``Model.step_on_off``, the CLI on event files).
+
+Every model takes a bin as the net luminance change ``P = p_on - p_off`` of its input stage
+(the engine's kernels read one signed ``P``). The compiled paths of all five models are checked
+against the NumPy float64 references on bins with mixed ON and OFF pixels, and C-DNF's Table I
+row (``cdnf_ti.paper.TABLE1``) is checked through the CLI on events of the six basic stimuli
+made by an emulator other than cdnf_ti's.
+"""
+from __future__ import annotations
+
+import csv
+
+import numpy as np
+import pytest
+from other_emulator import other_emulate
+
+from cdnf_ti import CDNF
+from cdnf_ti.backends.cdnf import LaneTaichiCDNFBackend, TaichiCDNFBackend
+from cdnf_ti.errors import UserError
+from cdnf_ti.events import open_event_source
+from cdnf_ti.frames import iter_grey
+from cdnf_ti.inputs import resolve_input
+from cdnf_ti.models import create_model
+from cdnf_ti.paper import TABLE1
+from cdnf_ti.run import main
+from cdnf_ti.stimuli.basic import BASIC_STIMULI
+from cdnf_ti.taichi_runtime import lanes
+
+SIZE = 128  # the basic stimuli at 128 px keep C-DNF's Table I row on frames
+
+
+def mixed_bins(n: int, shape: tuple[int, int], seed: int, density: float = 0.3) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``n`` bins of ``(p_on, p_off)``: event counts 0..3 at threshold 0.2 on a fraction ``density`` of
+    the pixels per polarity, so some pixels get both polarities in one bin."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        on, off = (np.minimum(0.2 * rng.integers(0, 4, shape) * (rng.random(shape) < density), 1.0) for _ in "ab")
+        out.append((on, off))
+    return out
+
+
+def test_mixed_bins_have_pixels_with_both_polarities():
+    on, off = mixed_bins(1, (40, 70), seed=0)[0]
+    assert np.any((on > 0) & (off > 0)) and np.any((on > 0) & (off == 0)) and np.any((on == 0) & (off > 0))
+
+
+@pytest.mark.parametrize("fast", [True, False])
+def test_cdnf_event_bins_match_the_reference_on_mixed_on_off_pixels(fast):
+    width = 2 * lanes() + 6  # the lane path needs frames at least two lane elements wide
+    bins = mixed_bins(4, (40, width), seed=1)
+    model = CDNF()
+    model.fast = fast
+    a = model.run(bins)
+    b = CDNF(backend="numpy").run(bins)
+    assert isinstance(model._be, LaneTaichiCDNFBackend if fast else TaichiCDNFBackend)
+    assert np.max(np.abs(a.output - b.output)) < 1e-5
+    assert np.max(np.abs(a.output - 0.5)) > 1e-4  # the bins really move I_v
+
+
+def test_every_event_bin_is_a_full_step_including_bin_0():
+    on, off = mixed_bins(1, (24, 24), seed=2)[0]
+    trace = CDNF(backend="numpy").run([(on, off)])
+    assert trace.n_frames == 1
+    assert trace.diagnostics["iterations_on"][0] > 1
+    assert trace.output[0] != 0.5
+
+
+def test_a_pixel_with_both_polarities_gets_their_difference():
+    on, off = mixed_bins(1, (24, 24), seed=3)[0]
+    a = CDNF(backend="numpy").run([(on, off)])
+    b = CDNF(backend="numpy").run([(np.maximum(on - off, 0.0), np.maximum(off - on, 0.0))])
+    np.testing.assert_array_equal(a.output, b.output)
+
+
+@pytest.mark.parametrize("name", ["lgmd1", "lgmd2", "flgmd_onn", "sdnf"])
+@pytest.mark.parametrize("fast", [True, False])
+def test_the_lgmd_family_and_sdnf_event_bins_match_the_reference_on_mixed_on_off_pixels(name, fast):
+    width = 2 * lanes() + 6
+    bins = mixed_bins(5, (40, width), seed=5, density=0.04)  # sparse: below the LGMD family's FFI
+    model = create_model(name)
+    model.fast = fast
+    a = model.run(bins)
+    b = create_model(name, backend="numpy").run(bins)
+    assert a.n_frames == len(bins)
+    assert np.max(np.abs(a.output - b.output)) < 1e-4
+    assert np.array_equal(a.spike, b.spike)
+    assert np.ptp(b.output) > 1e-3  # the bins really move the output
+
+
+def test_lgmd_channels_take_255_times_the_net_contrast():
+    on, off = mixed_bins(1, (24, 24), seed=6)[0]
+    model = create_model("lgmd1", backend="numpy")
+    model.step_on_off(on, off)
+    np.testing.assert_allclose(model.fields()["P"], 255.0 * (on - off), rtol=0, atol=1e-9)
+
+
+def test_a_model_without_an_event_input_stage_says_so():
+    on, off = mixed_bins(1, (24, 24), seed=4)[0]
+    model = CDNF(backend="numpy")
+    type(model).takes_events, was = False, type(model).takes_events
+    try:
+        with pytest.raises(UserError, match="does not take event input"):
+            model.step_on_off(on, off)
+    finally:
+        type(model).takes_events = was
+
+
+@pytest.fixture(scope="module")
+def recordings(tmp_path_factory):
+    """Per threshold, events (lin-log emulator) of the six basic stimuli as .npy files."""
+    folder = tmp_path_factory.mktemp("events")
+    frames = {}
+    for name in BASIC_STIMULI:
+        src = resolve_input(f"stim:{name}?size={SIZE}")
+        frames[name] = (src.fps, list(iter_grey(src)))
+
+    def make(threshold: float) -> dict[str, str]:
+        out = {}
+        for name, (fps, fr) in frames.items():
+            path = folder / f"{name}_{threshold:g}.npy"
+            if not path.exists():
+                np.save(path, other_emulate(fr, fps, threshold))
+            out[name] = str(path)
+        return out
+
+    return make, {k: len(v[1]) for k, v in frames.items()}
+
+
+@pytest.mark.parametrize("threshold", [0.1, 0.2, 0.3])
+def test_cdnf_keeps_its_table_i_row_on_event_recordings_through_the_cli(recordings, tmp_path, threshold):
+    make, n_frames = recordings
+    paths = make(threshold)
+    out = tmp_path / "out"
+    code = main([*paths.values(), "--model", "cdnf", "--event-threshold", str(threshold), "--bin-ms", "33.333",
+                 "--sensor-size", f"{SIZE}x{SIZE}", "--out", str(out), "--no-progress"])
+    assert code == 0
+    for name, path in paths.items():
+        with open(out / f"{name}_{threshold:g}.cdnf.csv", newline="") as f:
+            rows = list(csv.DictReader(f))
+        n_bins = sum(1 for _ in open_event_source(path, (SIZE, SIZE), 33.333).counts())
+        assert len(rows) == n_bins  # one row per bin
+        if "receding" not in name:  # events up to the last frame: one bin per frame interval
+            assert n_bins == n_frames[name] - 1
+        alerted = any(r["spike"] == "1" for r in rows)
+        assert alerted == (TABLE1["cdnf"][name] == 1), name
