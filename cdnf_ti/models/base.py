@@ -28,6 +28,11 @@ class NotConvergedWarning(RuntimeWarning):
     """A per-frame fixed point did not reach its tolerance within ``max_iter``."""
 
 
+#: Steps left out of a trace's time: the first allocates the model's state and compiles kernels,
+#: and a model that computes nothing on frame 0 (the LGMD family) compiles its layers on frame 1.
+WARMUP_STEPS = 2
+
+
 @dataclass
 class StepResult:
     """Output of one model step (one frame).
@@ -70,7 +75,8 @@ class Trace:
     diagnostics : dict of str to ndarray, shape (T,)
     seconds : float
         Wall time spent in the model's steps (s), excluding frame decoding and
-        the first frame (which allocates the model's state and compiles kernels).
+        the first :data:`WARMUP_STEPS` frames (they allocate the model's state and
+        compile its kernels: a model that computes nothing on frame 0 compiles on frame 1).
     """
 
     model: str
@@ -94,8 +100,9 @@ class Trace:
 
     @property
     def fps(self) -> float:
-        """Model throughput in frames per second (frames after the first / ``seconds``)."""
-        return (self.n_frames - 1) / self.seconds if self.seconds > 0 and self.n_frames > 1 else float("nan")
+        """Model throughput in frames per second (frames after the first :data:`WARMUP_STEPS` / ``seconds``)."""
+        timed = self.n_frames - WARMUP_STEPS
+        return timed / self.seconds if self.seconds > 0 and timed > 0 else float("nan")
 
     @classmethod
     def from_steps(cls, model: "Model", steps: list[StepResult], seconds: float) -> "Trace":
@@ -509,7 +516,7 @@ def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bo
                         raise
                     errors[k] = e
                     continue
-                if len(steps[k]) > 1:  # the first step allocates state and compiles kernels
+                if len(steps[k]) > WARMUP_STEPS:  # the first steps allocate state and compile kernels
                     seconds[k] += time.perf_counter() - t0
             if bar is not None:
                 bar.update(1)
