@@ -38,20 +38,18 @@ def _package_folders() -> list[Path]:
     return folders
 
 
-def source_files() -> list[Path]:
+def source_files() -> list[tuple[str, Path]]:
     """The package's Python source files that results can depend on, in a fixed order.
 
     Returns
     -------
-    list of Path
-        Every ``*.py`` file directly inside the folders of :data:`_PACKAGES` (sub-packages are
-        listed themselves), sorted by their path relative to their package.
+    list of (str, Path)
+        ``("<package>/<file>.py", path)`` for every ``*.py`` file directly inside the folders of
+        :data:`_PACKAGES` (sub-packages are listed themselves), sorted by that name.
     """
-    files: dict[str, Path] = {}
-    for name, folder in zip(_PACKAGES, _package_folders()):
-        for f in sorted(folder.glob("*.py")):
-            files[f"{name}/{f.name}"] = f
-    return [files[k] for k in sorted(files)]
+    files = {f"{name}/{f.name}": f for name, folder in zip(_PACKAGES, _package_folders())
+             for f in folder.glob("*.py")}
+    return sorted(files.items())
 
 
 @lru_cache(maxsize=1)
@@ -62,11 +60,10 @@ def source_digest() -> str:
     of any module, a kernel or a comment alike, gives another digest.
     """
     h = hashlib.sha256()
-    for name, folder in zip(_PACKAGES, _package_folders()):
-        for f in sorted(folder.glob("*.py")):
-            h.update(f"{name}/{f.name}\0".encode())
-            h.update(f.read_bytes())
-            h.update(b"\0")
+    for name, path in source_files():
+        h.update(f"{name}\0".encode())
+        h.update(path.read_bytes())
+        h.update(b"\0")
     return h.hexdigest()[:16]
 
 

@@ -312,15 +312,15 @@ def merge_summary(path: Path, new_rows: list[dict], write_text) -> None:
     # a failed input replaces nothing: the earlier trace of that key is still on disk, and so stays its row
     new_rows = [r for r in new_rows if not (str(r.get("status", "")).startswith("error")
                                              and _summary_key(r) in old_keys)]
-    new_keys = {_summary_key(r) for r in new_rows}
+    by_key = {_summary_key(r): r for r in new_rows}
     for r in old:
-        mine = next((n for n in new_rows if _summary_key(n) == _summary_key(r)), None)
+        mine = by_key.get(_summary_key(r))
         if mine is not None and r.get("status") != "" and not str(r.get("status", "")).startswith("error") \
                 and (r.get("params") or "") != (mine.get("params") or ""):
             print(f"note: {path.parent / mine['trace']} replaces the trace of an earlier run made with other "
                   f"parameters ({r.get('params') or 'defaults'} -> {mine.get('params') or 'defaults'})",
                   file=sys.stderr)
-    kept = [r for r in old if _summary_key(r) not in new_keys]
+    kept = [r for r in old if _summary_key(r) not in by_key]
     columns = list(SUMMARY_COLUMNS) + [c for r in kept for c in r if c not in SUMMARY_COLUMNS and c != "_i"]
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=list(dict.fromkeys(columns)), extrasaction="ignore",
