@@ -48,7 +48,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
     lanes per vector element of the fast path: a namespace of every name below (and the
     module-level constants). Built once per (compiler, lanes), after the runtime started."""
     C = common.build(ti, lanes)
-    run_workers = schedule.build(ti, lanes).run_workers
+    workers = schedule.build(ti, lanes).workers
     LANE2 = C.LANE2
     LANE3 = C.LANE3
     LANES = C.LANES
@@ -564,10 +564,16 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
     #: C-DNF's contrast solve: load the frame (the ON/OFF input stage), update both contrast
     #: fields, and at convergence the Summation input.
+    @ti.func
+    def _contrast_controls(ctx: ti.template()):
+        """The contrast solve's workers, rows, updates at most and stopping rule."""
+        return ctx.nw, ctx.P.shape[0], ctx.n, ctx.tol, ctx.grow
+
     CONTRAST_PLAN = Plan(before=(_load_stage,), runs_before=_loads, update=(_contrast_stage,),
-                         after=(_summation_input_stage,))
+                         after=(_summation_input_stage,), controls=_contrast_controls)
+    contrast_workers = workers(CONTRAST_PLAN)
     ContrastCtx = context("ContrastCtx", "frame load L scale first P u_on u_off pend c k0 k1 h record tau rbuf W mode "
-                                         "S pend_s alpha_on alpha_off theta_scale v s start local R")
+                                         "S pend_s alpha_on alpha_off theta_scale v s start local R nw n tol grow")
 
     @vector_kernel
     @ti.kernel
@@ -581,7 +587,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
         v: LANE3, s: ti.i32, start: START, local: ti.i32, R: ti.template(),
     ):
         """Up to ``n`` ON/OFF updates (:func:`field_update`) in one launch, by persistent workers
-        (:data:`CONTRAST_PLAN` on the engine's scheduler, :func:`~cdnf_ti.kernels.schedule.run_workers`).
+        (:data:`CONTRAST_PLAN` on the engine's scheduler, :func:`~cdnf_ti.kernels.schedule.build`'s ``workers``).
 
         Update ``j`` reads buffer ``(c + j) % 2`` of ``u_on``/``u_off`` and writes the other
         one, with ``lam, mom = record[j, 0:2]``; the updates stop after the first one whose
@@ -596,8 +602,8 @@ def build(ti, lanes: int) -> SimpleNamespace:
         """
         ctx = ti.static(ContrastCtx(frame, load, L, scale, first, P, u_on, u_off, pend, c, k0, k1, h, record, tau,
                                     rbuf, W, mode, S, pend_s, alpha_on, alpha_off, theta_scale, v, s, start, local,
-                                    R))
-        run_workers(CONTRAST_PLAN, ctx, sync, rbuf, nw, P.shape[0], n, tol, grow)
+                                    R, nw, n, tol, grow))
+        contrast_workers(ctx)
         record_residuals(rbuf, record, 2)
 
 
@@ -692,8 +698,15 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
         #: The Summation solve: each update a row pass and a column pass with the update;
         #: at convergence, the mean activation.
-        plan = Plan(update=(_row_pass_stage, _update_stage), after=(_activation_stage,))
-        Ctx = context("SummationCtx", "S v row1 row2 pend c A B h record tau rbuf W mode theta_scale msum")
+        @ti.func
+        def _controls(ctx: ti.template()):
+            """The Summation solve's workers, rows, updates at most and stopping rule."""
+            return ctx.nw, ctx.S.shape[0], ctx.n, ctx.tol, ctx.grow
+
+        plan = Plan(update=(_row_pass_stage, _update_stage), after=(_activation_stage,), controls=_controls)
+        summation_workers = workers(plan)
+        Ctx = context("SummationCtx", "S v row1 row2 pend c A B h record tau rbuf W mode theta_scale msum "
+                                      "nw n tol grow")
 
         @vector_kernel
         @ti.kernel
@@ -712,8 +725,9 @@ def build(ti, lanes: int) -> SimpleNamespace:
             """
             msum[0] = 0.0
             msum[1] = 0.0
-            ctx = ti.static(Ctx(S, v, row1, row2, pend, c, A, B, h, record, tau, rbuf, W, mode, theta_scale, msum))
-            run_workers(plan, ctx, sync, rbuf, nw, S.shape[0], n, tol, grow)
+            ctx = ti.static(Ctx(S, v, row1, row2, pend, c, A, B, h, record, tau, rbuf, W, mode, theta_scale, msum,
+                                nw, n, tol, grow))
+            summation_workers(ctx)
             record_residuals(rbuf, record, 1)
             total[0] = -1.0
             if msum[1] > 0.0:  # the sum was computed (the workers have all finished here)

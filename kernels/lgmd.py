@@ -42,7 +42,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
     lanes per vector element of the fast path: a namespace of every name below (and the
     module-level constants). Built once per (compiler, lanes), after the runtime started."""
     C = common.build(ti, lanes)
-    run_workers = schedule.build(ti, lanes).run_workers
+    workers = schedule.build(ti, lanes).workers
     LANE2 = C.LANE2
     LANE3 = C.LANE3
     LANES = C.LANES
@@ -659,9 +659,16 @@ def build(ti, lanes: int) -> SimpleNamespace:
         ctx.msum[1] = 1.0
 
     #: F-LGMD's solve: the feedback updates, then at the fixed point the layers and the grouping.
-    FLGMD_PLAN = Plan(update=(_feedback_stage,), after=(_feedback_finish_stage, _group_stage))
+    @ti.func
+    def _flgmd_controls(ctx: ti.template()):
+        """F-LGMD's solve: its workers, rows, updates at most and stopping rule."""
+        return ctx.nw, ctx.on0.shape[0], ctx.n, ctx.tol, ctx.grow
+
+    FLGMD_PLAN = Plan(update=(_feedback_stage,), after=(_feedback_finish_stage, _group_stage),
+                      controls=_flgmd_controls)
+    flgmd_workers = workers(FLGMD_PLAN)
     FLGMDCtx = context("FLGMDCtx", "on0 off0 on off q_on q_off S_on S_off S G p_on n_on p_off n_off wn wf beta_on "
-                                   "beta_off t_s record rbuf msum W with_off")
+                                   "beta_off t_s record rbuf msum W with_off nw n tol grow")
 
     @vector_kernel
     @ti.kernel
@@ -692,8 +699,8 @@ def build(ti, lanes: int) -> SimpleNamespace:
         msum[0] = 0.0
         msum[1] = 0.0
         ctx = ti.static(FLGMDCtx(on0, off0, on, off, q_on, q_off, S_on, S_off, S, G, p_on, n_on, p_off, n_off, wn, wf,
-                                 beta_on, beta_off, t_s, record, rbuf, msum, W, with_off))
-        run_workers(FLGMD_PLAN, ctx, sync, rbuf, nw, on0.shape[0], n, tol, grow)
+                                 beta_on, beta_off, t_s, record, rbuf, msum, W, with_off, nw, n, tol, grow))
+        flgmd_workers(ctx)
         record_residuals(rbuf, record, 2)
         out[0] = -1.0
         if msum[1] > 0.0:  # the layers were computed (the workers have all finished here)
@@ -789,11 +796,18 @@ def build(ti, lanes: int) -> SimpleNamespace:
         ti.atomic_add(ctx.msum[0], acc)
 
     #: LGMD2's layers: delayed inhibitions and S, then Ce and max |Ce|, then the grouping.
-    LGMD2_PLAN = Plan(after=(_delayed_stage, _excitation_stage, _grouping_stage))
+    @ti.func
+    def _layers_controls(ctx: ti.template()):
+        """The layers' workers and rows (no updates)."""
+        return ctx.nw, ctx.S.shape[0], 0, 0.0, 0.0
+
+    LGMD2_PLAN = Plan(after=(_delayed_stage, _excitation_stage, _grouping_stage), controls=_layers_controls)
     #: LGMD1's layers: delayed spreads and S, then the grouping.
-    LGMD1_PLAN = Plan(after=(_delayed_stage, _group_stage))
+    LGMD1_PLAN = Plan(after=(_delayed_stage, _group_stage), controls=_layers_controls)
+    lgmd2_workers = workers(LGMD2_PLAN)
+    lgmd1_workers = workers(LGMD1_PLAN)
     LayersCtx = context("LayersCtx", "on off c q X_on X_off S Ce G kn an kf af model sp e3 delta_c c_w c_de t_de "
-                                     "rbuf msum W")
+                                     "rbuf msum W nw")
 
     @vector_kernel
     @ti.kernel
@@ -813,8 +827,8 @@ def build(ti, lanes: int) -> SimpleNamespace:
         msum[0] = 0.0
         ctx = ti.static(LayersCtx(on, off, c, q, I_on, I_off, S, Ce, G, (kn0, kn1, kn2), (an0, an1, an2),
                                   (kf0, kf1, kf2), (af0, af1, af2), "lgmd2", (w_on, w_off, 0.0), (e_on, e_off, e_onoff),
-                                  delta_c, c_w, c_de, t_de, rbuf, msum, W))
-        run_workers(LGMD2_PLAN, ctx, sync, rbuf, nw, S.shape[0], 0, 0.0, 0.0)
+                                  delta_c, c_w, c_de, t_de, rbuf, msum, W, nw))
+        lgmd2_workers(ctx)
         out[0] = msum[0]
         out[1] = ti.cast(ti.max(rbuf[0, 0], 0.0), ti.f64)
 
@@ -835,8 +849,8 @@ def build(ti, lanes: int) -> SimpleNamespace:
         k = (0.0, k1, k2)  # centre 0
         a = (0.0, a1, a2)
         ctx = ti.static(LayersCtx(on, off, c, q, I_on, E_off, S, S, G, k, a, k, a, "lgmd1", (w_i_on, w_i_off, t_s),
-                                  (e_on, e_off, e_onoff), 0.0, 0.0, 0.0, 0.0, rbuf, msum, W))
-        run_workers(LGMD1_PLAN, ctx, sync, rbuf, nw, S.shape[0], 0, 0.0, 0.0)
+                                  (e_on, e_off, e_onoff), 0.0, 0.0, 0.0, 0.0, rbuf, msum, W, nw))
+        lgmd1_workers(ctx)
         out[0] = msum[0]
 
     return namespace(globals(), locals())

@@ -6,9 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from ..kernels.common import MAX_STEPS
-from ..kernels.schedule import sync_size
-from ..taichi_runtime import dsl, lanes
+from ..taichi_runtime import kernels, lanes
 
 
 class Scratch:
@@ -16,9 +14,8 @@ class Scratch:
 
     The phase counters ``sync`` (int32, :func:`~cdnf_ti.kernels.schedule.sync_size`), the
     per-update residuals ``rbuf`` (float32, (MAX_STEPS, 2)) and a launch's float64 sum and flag
-    ``msum``. They are fields, which the kernels take as template arguments, so one set for
-    every lane backend of the process means one compiled instance per kernel and frame width:
-    a second model compiles nothing new. ``lock`` serialises the launches that use them
+    ``msum``: the scheduler's fields (:func:`cdnf_ti.kernels.schedule.build`), one set per
+    process, so a second model compiles nothing new. ``lock`` serialises the launches that use them
     (:meth:`Model.step <cdnf_ti.models.base.Model.step>` holds it around each frame).
     """
 
@@ -26,10 +23,8 @@ class Scratch:
     _make = threading.Lock()
 
     def __init__(self):
-        ti = dsl()
-        self.sync = ti.field(ti.i32, sync_size())
-        self.rbuf = ti.field(ti.f32, (MAX_STEPS, 2))
-        self.msum = ti.field(ti.f64, 2)
+        sched = kernels("schedule")
+        self.sync, self.rbuf, self.msum = sched.sync, sched.rbuf, sched.msum
         self.lock = threading.RLock()
 
     @classmethod
