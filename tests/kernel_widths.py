@@ -9,17 +9,24 @@ every argument, and each member of a tuple argument (recursively) as one: a cont
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import sys
+import types
 
 import numpy as np
 
 
 def leaves(value) -> int:
-    """How many parameters ``value`` stands for: 1, or the members of a tuple, recursively."""
+    """How many parameters ``value`` stands for: 1, or the members of a tuple, list, namespace or
+    dataclass instance (a context however it is spelt), recursively."""
     if isinstance(value, (tuple, list)):
         return sum(leaves(v) for v in value)
+    if isinstance(value, types.SimpleNamespace):
+        return sum(leaves(v) for v in vars(value).values())
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return sum(leaves(getattr(value, f.name)) for f in dataclasses.fields(value))
     return 1
 
 
