@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Iterable
 
 from ..errors import InputError
+from ..events.readers import is_event_file
 from ..frames import open_source
 
 #: Label values and the class each maps to (``near-miss`` counts as non-collision).
@@ -288,14 +289,18 @@ def validate_dataset(labels: Iterable[ClipLabel], folder: str | os.PathLike,
     return files
 
 
+def is_clip_file(path: Path) -> bool:
+    """Whether ``path`` is a clip a dataset runs: a video file, an ``.npy`` array, or an event recording."""
+    return path.is_file() and (path.suffix.lower() in VIDEO_EXTENSIONS or is_event_file(path))
+
+
 def _videos_named(folder: Path, clip: str) -> list[Path]:
-    """The video files (and ``.npy`` arrays) in ``folder`` whose name is ``clip`` plus an extension."""
-    return sorted(p for p in folder.glob(f"{glob_escape(clip)}.*")
-                  if p.is_file() and p.stem == clip and p.suffix.lower() in VIDEO_EXTENSIONS)
+    """The clip files (:func:`is_clip_file`) in ``folder`` whose name is ``clip`` plus an extension."""
+    return sorted(p for p in folder.glob(f"{glob_escape(clip)}.*") if p.stem == clip and is_clip_file(p))
 
 
 def unlabelled_videos(folder: str | os.PathLike, labels: Iterable[ClipLabel]) -> list[str]:
-    """File names of the videos (and ``.npy`` arrays) in ``folder`` that no labels row names.
+    """File names of the videos, ``.npy`` arrays and event recordings in ``folder`` that no labels row names.
 
     Such videos are not run; the command line prints a note listing them.
     """
@@ -309,5 +314,4 @@ def unlabelled_videos(folder: str | os.PathLike, labels: Iterable[ClipLabel]) ->
         entries = sorted(folder.iterdir())
     except OSError:
         return []
-    return [p.name for p in entries
-            if p.is_file() and p.suffix.lower() in VIDEO_EXTENSIONS and p.name not in named]
+    return [p.name for p in entries if p.name not in named and is_clip_file(p)]
