@@ -148,6 +148,10 @@ def robust_range(a: np.ndarray) -> tuple[float, float]:
     return float(lo), float(hi)
 
 
+#: The key of the event panel's scale in :func:`field_ranges`.
+EVENTS_KEY = "events"
+
+
 def _step(model: Any, item: Any) -> Any:
     """Step ``model`` on one input: a frame, or an event bin ``(p_on, p_off)`` (its ON/OFF input stage)."""
     with warnings.catch_warnings():
@@ -159,7 +163,8 @@ def field_ranges(model: Any, frames: Iterator[np.ndarray], progress: bool | str 
                  n_total: int | None = None) -> dict[str, tuple[float, float]]:
     """First pass of a movie: each shown field's range over all ``frames`` (the colour bars' fixed scales).
 
-    Returns ``{field: (lo, hi)}``: the smallest 0.5 and the largest 99.5 percentile over the frames.
+    Returns ``{field: (lo, hi)}``: the smallest 0.5 and the largest 99.5 percentile over the frames;
+    for event bins also ``{"events": (-m, m)}``, ``m`` the largest net contrast (:func:`event_scale`).
     """
     model.reset()
     ranges: dict[str, tuple[float, float]] = {}
@@ -167,6 +172,9 @@ def field_ranges(model: Any, frames: Iterator[np.ndarray], progress: bool | str 
     try:
         for frame in frames:
             _step(model, frame)
+            if isinstance(frame, tuple):  # the event panel's scale: the largest net contrast of the recording
+                m = max(event_scale(*frame), ranges.get(EVENTS_KEY, (0.0, 0.0))[1])
+                ranges[EVENTS_KEY] = (-m, m)
             fields = model.fields()
             for key, _ in _pick_fields(model.name, fields):
                 lo, hi = robust_range(fields[key])
@@ -189,45 +197,57 @@ EVENT_ON = np.array([0.0, 255.0, 0.0])
 EVENT_OFF = np.array([0.0, 0.0, 255.0])
 
 
-def event_panel(p_on: np.ndarray, p_off: np.ndarray) -> np.ndarray:
-    """An event bin as the models take it: its net contrast ``P = P_on - P_off`` in [-1, 1], drawn on grey.
+def event_panel(p_on: np.ndarray, p_off: np.ndarray, scale: float = 1.0) -> np.ndarray:
+    """An event bin as the models take it: its net contrast ``P = P_on - P_off``, drawn on grey.
 
-    A pixel with net ON contrast ``a`` is grey blended towards green by ``a``; net OFF, towards red;
-    no events (or as much ON as OFF), grey.
+    A pixel with net ON contrast ``a`` is grey blended towards green by ``a / scale`` (green at
+    ``a >= scale``); net OFF, towards red; no events (or as much ON as OFF), grey.
 
     Parameters
     ----------
     p_on, p_off : ndarray, (H, W)
         The bin's ON and OFF contrast, in [0, 1].
+    scale : float
+        The net contrast shown at full colour (a movie's largest, so that one event of
+        contrast ``C`` is not a faint tint; 1: the models' whole range).
 
     Returns
     -------
     ndarray, (H, W, 3) uint8
         BGR image.
     """
-    net = np.clip(np.asarray(p_on, np.float64) - np.asarray(p_off, np.float64), -1.0, 1.0)[..., None]
+    net = np.asarray(p_on, np.float64) - np.asarray(p_off, np.float64)
+    net = np.clip(net / max(float(scale), 1e-9), -1.0, 1.0)[..., None]
     on, off = np.maximum(net, 0.0), np.maximum(-net, 0.0)
     img = EVENT_GREY * (1.0 - on - off) + EVENT_ON * on + EVENT_OFF * off
     return np.clip(np.rint(img), 0, 255).astype(np.uint8)
 
 
-def event_bar(height: int) -> np.ndarray:
-    """The event panel's colour bar (``height`` x :data:`CBAR_W`): +1 (ON, green) at the top to -1 (OFF, red)."""
+def event_bar(height: int, scale: float = 1.0) -> np.ndarray:
+    """The event panel's colour bar (``height`` x :data:`CBAR_W`): ``+scale`` (ON, green) at the top to
+    ``-scale`` (OFF, red) at the bottom."""
     img = np.full((height, CBAR_W, 3), 24, np.uint8)
     ramp = np.linspace(1.0, -1.0, height)[:, None].repeat(8, axis=1)
     img[:, 2:10] = event_panel(np.maximum(ramp, 0.0), np.maximum(-ramp, 0.0))
-    marks = [("+1 ON", 8), ("-1 OFF", height - 2)] + ([("0", height // 2 + 3)] if height >= 40 else [])
+    marks = [(f"+{scale:.3g} ON", 8), (f"-{scale:.3g} OFF", height - 2)] + ([("0", height // 2 + 3)]
+                                                                          if height >= 40 else [])
     for txt, y in marks:
         cv2.putText(img, txt, (12, y), PANEL_FONT, 0.3, (230, 230, 230), 1, cv2.LINE_AA)
     return img
 
 
-def input_panel(item: Any) -> np.ndarray:
-    """The input panel of one step, with its colour bar: the grey frame, or an event bin (:func:`event_panel`)."""
+def event_scale(p_on: np.ndarray, p_off: np.ndarray) -> float:
+    """The largest net contrast ``|P_on - P_off|`` of a bin (the event panel's scale is the movie's largest)."""
+    return float(np.max(np.abs(np.asarray(p_on, np.float64) - np.asarray(p_off, np.float64)), initial=0.0))
+
+
+def input_panel(item: Any, scale: float = 1.0) -> np.ndarray:
+    """The input panel of one step, with its colour bar: the grey frame, or an event bin
+    (:func:`event_panel`, full colour at net contrast ``scale``)."""
     if isinstance(item, tuple):
-        img = event_panel(*item)
+        img = event_panel(*item, scale=scale)
         _label(img, "events")
-        return np.concatenate([img, event_bar(img.shape[0])], 1)
+        return np.concatenate([img, event_bar(img.shape[0], scale)], 1)
     grey = to_grey(item)
     g8 = grey if grey.dtype == np.uint8 else np.clip(np.rint(grey * 255), 0, 255).astype(np.uint8)
     img = cv2.cvtColor(g8, cv2.COLOR_GRAY2BGR)
@@ -305,8 +325,8 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
     window : (int, int), optional
         The labelled collision window (frames), shaded in the trace.
     ranges : dict, optional
-        ``{field: (lo, hi)}``, the fixed colour scales (:func:`field_ranges`); without it each
-        scale grows with the values seen so far.
+        ``{field: (lo, hi)}``, the fixed colour scales (:func:`field_ranges`; ``"events"``: the
+        event panel's); without it each scale grows with the values seen so far.
     """
     model.reset()
     out: list[float] = []
@@ -314,6 +334,7 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
     spikes: list[bool] = []
     scales: dict[str, FieldScale] = {}
     uses_count = False
+    ev_scale = 0.0
     n_ts = getattr(model.params, "n_ts", None)
     bar = None
     if progress:
@@ -331,7 +352,10 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
                 dyn = res.diagnostics.get("dyn_threshold")
                 thr.append(float(dyn) if dyn is not None else model.threshold)
             spikes.append(bool(res.spike))
-            first = input_panel(frame)
+            if isinstance(frame, tuple):
+                ev = (ranges or {}).get(EVENTS_KEY)
+                ev_scale = max(ev_scale, ev[1] if ev else event_scale(*frame))  # fixed, or the largest so far
+            first = input_panel(frame, ev_scale or 1.0)
             hw = (first.shape[0], first.shape[1] - CBAR_W)  # the input's (H, W)
             panels = [first]
             fields = model.fields()
