@@ -261,8 +261,10 @@ def _label(img: np.ndarray, text: str) -> None:
 
 
 def _trace_panel(width: int, t: int, n_total: int | None, out: list[float], thr: list[float | None],
-                 spikes: list[bool], name: str, fps: float, window: tuple[int, int] | None) -> np.ndarray:
-    """The output so far (white), its threshold (dashed yellow), alerts (red) over frames 0..n_total."""
+                 spikes: list[bool], name: str, fps: float, window: tuple[int, int] | None,
+                 unit: str = "frame") -> np.ndarray:
+    """The output so far (white), its threshold (dashed yellow), alerts (red) over frames 0..n_total
+    (``unit``: what a step is called, ``"frame"``, or ``"bin"`` for an event recording)."""
     h = TRACE_H
     img = np.full((h, width, 3), 24, np.uint8)
     n = max(n_total or 0, t + 1, 2)
@@ -299,7 +301,7 @@ def _trace_panel(width: int, t: int, n_total: int | None, out: list[float], thr:
             cv2.line(img, (X(i), y1 - 10), (X(i), y1), (0, 0, 255), 2)
     cv2.line(img, (X(t), y0), (X(t), y1), (0, 255, 0), 1)
     alert = bool(spikes and spikes[-1])
-    cv2.putText(img, f"{name}  frame {t}  t={t / fps:.2f}s  (x axis: frames; purple: labelled window)", (x0, 16),
+    cv2.putText(img, f"{name}  {unit} {t}  t={t / fps:.2f}s  (x axis: {unit}s; purple: labelled window)", (x0, 16),
                 PANEL_FONT, 0.42, (255, 255, 255), 1, cv2.LINE_AA)
     cv2.putText(img, "-- threshold", (x0 + 4, y0 + 12), PANEL_FONT, 0.35, (0, 220, 255), 1, cv2.LINE_AA)
     if alert:
@@ -372,7 +374,8 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
                 panels.append(np.zeros_like(panels[0]))
             top = np.concatenate([np.concatenate(panels[:2], 1), np.concatenate(panels[2:4], 1)], 0)
             name = f"{model.name} spike count (n_ts {n_ts})" if uses_count else f"{model.name} {model.output_name}"
-            trace = _trace_panel(top.shape[1], t, n_total, out, thr, spikes, name, fps, window)
+            trace = _trace_panel(top.shape[1], t, n_total, out, thr, spikes, name, fps, window,
+                                 "bin" if isinstance(frame, tuple) else "frame")
             movie = np.concatenate([top, trace], 0)
             if movie.shape[0] % 2 or movie.shape[1] % 2:  # even sizes for MPEG-4
                 movie = movie[: movie.shape[0] // 2 * 2, : movie.shape[1] // 2 * 2]

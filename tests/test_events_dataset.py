@@ -291,3 +291,12 @@ def test_a_clip_name_matching_a_video_and_a_recording_is_ambiguous(recordings, t
     assert _dataset(data, tmp_path / "out") == 2
     err = capsys.readouterr().err
     assert "matches several videos" in err and "loom.npy" in err and "loom.raw" in err
+
+
+def test_dataset_render_makes_a_movie_of_each_recording(recordings, tmp_path):
+    out = tmp_path / "out"
+    assert _dataset(recordings, out, "--render") == 0
+    movies = sorted(p.name for p in (out / "movies").iterdir())
+    assert movies == ["loom.cdnf.mp4", "translate.cdnf.mp4"]
+    cap = cv2.VideoCapture(str(out / "movies" / "loom.cdnf.mp4"))
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == _n_bins(recordings / "loom.npy")
