@@ -16,6 +16,7 @@ import pytest
 from event_encoders import encode_evt3, random_events, raw_header
 
 from cdnf_ti.events import EVENT_DTYPE, open_event_source
+from cdnf_ti.experiments.labels import frame_at, last_frame_before
 from cdnf_ti.models import create_model
 from cdnf_ti.render import EVENT_GREY, EVENT_OFF, EVENT_ON, event_panel, render_frames
 from cdnf_ti.run import main
@@ -300,3 +301,44 @@ def test_dataset_render_makes_a_movie_of_each_recording(recordings, tmp_path):
     assert movies == ["loom.cdnf.mp4", "translate.cdnf.mp4"]
     cap = cv2.VideoCapture(str(out / "movies" / "loom.cdnf.mp4"))
     assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == _n_bins(recordings / "loom.npy")
+
+
+# --- windows in seconds --------------------------------------------------------------------------
+
+SECONDS_LABELS = ("clip,label,window_start_s,window_end_s,contact_s\n"
+                  "loom,collision,0.4,0.7,0.75\ntranslate,non-collision,,,\n")
+
+
+@pytest.mark.parametrize("bin_ms, window, contact", [(1000 / 30, (12, 20), 22), (50.0, (8, 13), 15)])
+def test_a_window_in_seconds_is_scored_in_the_bins_of_bin_ms(recordings, tmp_path, bin_ms, window, contact):
+    data = _copy(recordings, tmp_path)
+    (data / "labels.csv").write_text(SECONDS_LABELS)
+    out = tmp_path / "out"
+    assert _dataset(data, out, "--bin-ms", f"{bin_ms!r}") == 0
+    row = _rows(out)[("loom", "cdnf")]
+    assert (int(row["window_start"]), int(row["window_end"]), int(row["contact_frame"])) == (*window, contact)
+
+
+def test_a_row_with_both_frames_and_seconds_is_rejected_before_any_work(recordings, tmp_path, capsys):
+    data = _copy(recordings, tmp_path)
+    (data / "labels.csv").write_text("clip,label,window_start,window_end,window_start_s,window_end_s\n"
+                                     "loom,collision,10,20,0.4,0.7\ntranslate,non-collision,,,,\n")
+    assert _dataset(data, tmp_path / "out") == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {data / 'labels.csv'}: row 2 (loom): the row gives both frames and seconds")
+
+
+def test_a_window_in_seconds_past_a_videos_end_is_rejected(recordings, tmp_path, capsys):
+    data = _copy(recordings, tmp_path)
+    np.save(data / "video.npy", np.full((12, 48, 64), 100, np.uint8))  # 12 frames at 30 fps: 0.4 s
+    (data / "labels.csv").write_text(SECONDS_LABELS + "video,collision,0.2,1.0,\n")
+    assert _dataset(data, tmp_path / "out") == 2
+    err = capsys.readouterr().err
+    assert "row 4 (video): window_end (from seconds) 29 is outside the video (frames 0..11)" in err
+
+
+def test_a_window_in_seconds_covers_the_frames_that_overlap_it():
+    # frame k spans [k / fps, (k + 1) / fps): 1.0 s starts frame 30 at 30 fps, 1.5 s starts frame 45
+    assert frame_at(1.0, 30.0) == 30 and last_frame_before(1.5, 30.0) == 44
+    assert frame_at(1.01, 30.0) == 30 and last_frame_before(1.51, 30.0) == 45
+    assert frame_at(0.7, 20.0) == 14 and last_frame_before(0.7, 20.0) == 13  # on a boundary

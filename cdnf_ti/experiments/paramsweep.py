@@ -54,7 +54,7 @@ from .clip_tasks import (
     task_fingerprint as task_fingerprint,
 )
 from .clipscores import choose_level, correctness_matrix, cross_validated_accuracy, roc
-from .labels import drop_missing, read_labels, validate_dataset
+from .labels import drop_missing, labels_in_frames, read_labels, validate_dataset
 from .layout import RAIN_CHOICES, trace_path
 from .nested import sweep_nested_cv
 from .scoring import Padding, score_clip
@@ -229,6 +229,7 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
     if skip_missing:
         labels, _ = drop_missing(labels, folder)
     files = validate_dataset(labels, folder, labels_path)
+    labels = labels_in_frames(labels, files, fps, (events or {}).get("bin_ms"), labels_path)
     conditions = frames_only_conditions(files, RAIN_CHOICES[rain], folder)
     note_inferred_sensor_size(files, (events or {}).get("sensor_size"))
     out = Path(out)
