@@ -479,7 +479,7 @@ def render_main(argv: Sequence[str]) -> int:
     add_rain_options(ap, default="off", what="the input (frames only)")
     add_seed_options(ap, rain=True)
     ap.add_argument("--window", default=None, metavar="START:END",
-                    help="labelled collision window in frames, shaded in the trace")
+                    help="labelled collision window in frames (bins for an event recording), shaded in the trace")
     ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     args = ap.parse_args(list(argv))
     models = parse_models(args.models)
