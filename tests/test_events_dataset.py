@@ -342,3 +342,14 @@ def test_a_window_in_seconds_covers_the_frames_that_overlap_it():
     assert frame_at(1.0, 30.0) == 30 and last_frame_before(1.5, 30.0) == 44
     assert frame_at(1.01, 30.0) == 30 and last_frame_before(1.51, 30.0) == 45
     assert frame_at(0.7, 20.0) == 14 and last_frame_before(0.7, 20.0) == 13  # on a boundary
+
+
+def test_a_downscaled_bin_carries_the_area_average_of_its_net_contrast():
+    from cdnf_ti.experiments.clip_tasks import _resized_bins
+
+    rng = np.random.default_rng(0)
+    p_on, p_off = rng.random((48, 64)), rng.random((48, 64))
+    (small_on, small_off), = list(_resized_bins([(p_on, p_off)], 0.5))
+    assert small_on.shape == (24, 32)
+    expected = (p_on - p_off).reshape(24, 2, 32, 2).mean(axis=(1, 3))
+    np.testing.assert_allclose(small_on - small_off, expected, atol=1e-12)
