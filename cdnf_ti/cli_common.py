@@ -24,15 +24,17 @@ The option scheme: one meaning per name in every subcommand (the README's "Optio
                             ``generate --out FILE.avi``, ``live --record FILE.mp4``)
 ``--workers N``, ``--scheduler ADDRESS``  parallel batch runs
 ``--no-progress``           hide progress bars
-``--sensor-size WxH``, ``--bin-ms``, ``--event-threshold C``  event recordings (``cdnf_ti.events.cli``)
+``--sensor-size WxH``, ``--bin-ms``, ``--event-threshold C``  how event recordings are binned and scaled
+                            (:func:`add_event_options`): ``run``, ``dataset``, ``table2``, ``sweep``,
+                            ``render``, ``events``
 ``--record FILE.mp4``, ``--jsonl``, ``--udp``  the live loop's outputs (``cdnf_ti.live``)
 ==========================  =======================================================================
 
 Each command adds the options it has with the helpers here (:func:`add_model_options`,
 :func:`add_param_options`, :func:`add_input_options`, :func:`add_rain_options`,
-:func:`add_seed_options`, :func:`add_output_option`) and reads them back with
-:func:`params_from_args`, :func:`rain_conditions`, :func:`rain_seed_of` and
-:func:`stimulus_seed_of`, so that a name has one meaning and one help text everywhere.
+:func:`add_seed_options`, :func:`add_output_option`, :func:`add_event_options`) and reads them back
+with :func:`params_from_args`, :func:`rain_conditions`, :func:`rain_seed_of`,
+:func:`stimulus_seed_of` and :func:`event_options_of`, so that a name has one meaning and one help text everywhere.
 
 A leaf module: ``cdnf_ti.run`` (the entry point) and the subcommand modules
 (``demo``, ``generate``, ``render``, ``experiments.cli``, ``bench.cli``) import it;
@@ -47,6 +49,8 @@ from pathlib import Path
 from typing import Sequence
 
 from .errors import UserError
+from .events.binning import DEFAULT_BIN_MS, DEFAULT_EVENT_THRESHOLD
+from .events.readers import parse_sensor_size
 from .limits import MAX_DROPS
 from .models import MODELS, get_model_class
 from .param_options import model_params
@@ -106,6 +110,50 @@ def add_input_options(ap: argparse.ArgumentParser) -> None:
                     help="channel order of colour .npy arrays (default: %(default)s, as OpenCV; arrays "
                          "from imageio, PIL or matplotlib are rgb). Video files and images are decoded by "
                          "OpenCV and are always right")
+
+
+# --- event recordings: --sensor-size, --bin-ms, --event-threshold ------------------------------------
+
+def sensor_size_arg(text: str) -> tuple[int, int]:
+    """argparse type: ``WxH`` (width x height in pixels)."""
+    try:
+        return parse_sensor_size(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def add_event_options(ap: argparse.ArgumentParser) -> None:
+    """``--sensor-size``, ``--bin-ms``, ``--event-threshold``: how an event recording becomes model input.
+
+    Read them back with :func:`event_options_of`.
+    """
+    ap.add_argument("--sensor-size", type=sensor_size_arg, default=None, metavar="WxH",
+                    help="sensor size of event recordings (default: the file's header; else the smallest that "
+                         "holds every event)")
+    ap.add_argument("--bin-ms", type=positive_float, default=DEFAULT_BIN_MS,
+                    help="events are binned into frames this long, ms (default: 1000/30 = 33.333..., one 30 fps "
+                         "frame)")
+    ap.add_argument("--event-threshold", type=positive_float, default=DEFAULT_EVENT_THRESHOLD, metavar="C",
+                    help="the sensor's log-contrast threshold C: n events at a pixel in a bin give the models a "
+                         "contrast min(1, n C) (default: %(default)s); for 'events VIDEO' the emulated threshold")
+
+
+def event_options_of(args: argparse.Namespace) -> dict:
+    """``{"sensor_size", "bin_ms", "event_threshold"}`` from the options of :func:`add_event_options`
+    (the defaults where the command has none)."""
+    return {"sensor_size": getattr(args, "sensor_size", None),
+            "bin_ms": float(getattr(args, "bin_ms", DEFAULT_BIN_MS)),
+            "event_threshold": float(getattr(args, "event_threshold", DEFAULT_EVENT_THRESHOLD))}
+
+
+def given_event_options(args: argparse.Namespace) -> list[str]:
+    """The event options given other than their defaults (``["--bin-ms"]``), for a ``note:`` when no
+    input is an event recording."""
+    opts = event_options_of(args)
+    return [o for o, changed in (("--sensor-size", opts["sensor_size"] is not None),
+                                 ("--bin-ms", opts["bin_ms"] != DEFAULT_BIN_MS),
+                                 ("--event-threshold", opts["event_threshold"] != DEFAULT_EVENT_THRESHOLD))
+            if changed]
 
 
 # --- rain: --rain [on|off|both], --rain-drops, --rain-seed ----------------------------------------
@@ -299,6 +347,14 @@ def positive_float(text: str) -> float:
     value = finite_float(text)
     if value <= 0:
         raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
+    return value
+
+
+def non_negative_float(text: str) -> float:
+    """argparse type: a finite number >= 0."""
+    value = finite_float(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
     return value
 
 

@@ -127,5 +127,6 @@ def describe_differences(keys: list[str]) -> str:
     words = {"source_digest": "source code", "compiler": "compiler", "compiler_version": "compiler version",
              "arch": "arch", "lanes": "lanes per vector", "version": "cdnf_ti version", "backend": "backend",
              "source_size": "input file", "source_mtime_ns": "input file", "source": "input path",
-             "seed": "seed", "rain_params": "rain settings", "params": "parameters", "downscale": "downscale"}
+             "seed": "seed", "rain_params": "rain settings", "params": "parameters", "downscale": "downscale",
+             "bin_ms": "--bin-ms", "event_threshold": "--event-threshold", "sensor_size": "--sensor-size"}
     return ", ".join(dict.fromkeys(words.get(k, k) for k in keys))

@@ -11,6 +11,10 @@ finds each field's range over the whole clip (0.5 and 99.5 percentiles of each
 frame, then the extremes of those), so a colour means the same value in every
 frame. Signed fields use a diverging map symmetric about 0.
 
+An event recording (README, "Event cameras") is rendered bin by bin: the model takes each
+bin through its ON/OFF input stage, and the input panel shows the bin's net contrast
+``P_on - P_off`` on grey, ON events green and OFF events red (:func:`event_panel`).
+
 Several models (``--model cdnf,lgmd2``) or ``--rain both`` make one movie each,
 ``<clip>.<model>[.rain].mp4`` in the ``--out`` folder; ``--out`` names the movie
 file itself (``.mp4`` or ``.avi``) when one movie is made.
@@ -33,6 +37,7 @@ from .atomic import prepare_output
 from .cli_common import (
     EXIT_OK,
     ArgumentParser,
+    add_event_options,
     add_input_options,
     add_model_options,
     add_output_option,
@@ -40,13 +45,17 @@ from .cli_common import (
     add_rain_options,
     add_seed_options,
     check_model_options,
+    event_options_of,
     note_unused_rain_options,
     params_from_args,
     parse_models,
     rain_conditions,
     rain_seed_of,
 )
-from .errors import UserError
+from .errors import InputError, UserError
+from .events.binning import DEFAULT_BIN_MS, DEFAULT_EVENT_THRESHOLD
+from .events.readers import is_event_file
+from .events.source import EventSource, open_event_source
 from .experiments.labels import find_clip
 from .experiments.layout import trace_path
 from .frames import iter_grey, to_grey
@@ -139,20 +148,33 @@ def robust_range(a: np.ndarray) -> tuple[float, float]:
     return float(lo), float(hi)
 
 
+#: The key of the event panel's scale in :func:`field_ranges`.
+EVENTS_KEY = "events"
+
+
+def _step(model: Any, item: Any) -> Any:
+    """Step ``model`` on one input: a frame, or an event bin ``(p_on, p_off)`` (its ON/OFF input stage)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NotConvergedWarning)  # recorded per frame in "converged"
+        return model.step_on_off(*item) if isinstance(item, tuple) else model.step(to_grey(item))
+
+
 def field_ranges(model: Any, frames: Iterator[np.ndarray], progress: bool | str = False,
                  n_total: int | None = None) -> dict[str, tuple[float, float]]:
     """First pass of a movie: each shown field's range over all ``frames`` (the colour bars' fixed scales).
 
-    Returns ``{field: (lo, hi)}``: the smallest 0.5 and the largest 99.5 percentile over the frames.
+    Returns ``{field: (lo, hi)}``: the smallest 0.5 and the largest 99.5 percentile over the frames;
+    for event bins also ``{"events": (-m, m)}``, ``m`` the largest net contrast (:func:`event_scale`).
     """
     model.reset()
     ranges: dict[str, tuple[float, float]] = {}
     bar = tqdm(total=n_total, desc=progress, unit="frame", disable=None) if isinstance(progress, str) else None
     try:
         for frame in frames:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", NotConvergedWarning)
-                model.step(to_grey(frame))
+            _step(model, frame)
+            if isinstance(frame, tuple):  # the event panel's scale: the largest net contrast of the recording
+                m = max(event_scale(*frame), ranges.get(EVENTS_KEY, (0.0, 0.0))[1])
+                ranges[EVENTS_KEY] = (-m, m)
             fields = model.fields()
             for key, _ in _pick_fields(model.name, fields):
                 lo, hi = robust_range(fields[key])
@@ -169,6 +191,69 @@ def field_ranges(model: Any, frames: Iterator[np.ndarray], progress: bool | str 
 #: The input panel's scale: grey levels 0..1.
 _GREY_SCALE = FieldScale(0.0, 1.0, grey=True)
 
+#: Colours of the event panel (BGR): the background (no net contrast), full ON (+1) and full OFF (-1).
+EVENT_GREY = np.array([128.0, 128.0, 128.0])
+EVENT_ON = np.array([0.0, 255.0, 0.0])
+EVENT_OFF = np.array([0.0, 0.0, 255.0])
+
+
+def event_panel(p_on: np.ndarray, p_off: np.ndarray, scale: float = 1.0) -> np.ndarray:
+    """An event bin as the models take it: its net contrast ``P = P_on - P_off``, drawn on grey.
+
+    A pixel with net ON contrast ``a`` is grey blended towards green by ``a / scale`` (green at
+    ``a >= scale``); net OFF, towards red; no events (or as much ON as OFF), grey.
+
+    Parameters
+    ----------
+    p_on, p_off : ndarray, (H, W)
+        The bin's ON and OFF contrast, in [0, 1].
+    scale : float
+        The net contrast shown at full colour (a movie's largest, so that one event of
+        contrast ``C`` is not a faint tint; 1: the models' whole range).
+
+    Returns
+    -------
+    ndarray, (H, W, 3) uint8
+        BGR image.
+    """
+    net = np.asarray(p_on, np.float64) - np.asarray(p_off, np.float64)
+    net = np.clip(net / max(float(scale), 1e-9), -1.0, 1.0)[..., None]
+    on, off = np.maximum(net, 0.0), np.maximum(-net, 0.0)
+    img = EVENT_GREY * (1.0 - on - off) + EVENT_ON * on + EVENT_OFF * off
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+
+def event_bar(height: int, scale: float = 1.0) -> np.ndarray:
+    """The event panel's colour bar (``height`` x :data:`CBAR_W`): ``+scale`` (ON, green) at the top to
+    ``-scale`` (OFF, red) at the bottom."""
+    img = np.full((height, CBAR_W, 3), 24, np.uint8)
+    ramp = np.linspace(1.0, -1.0, height)[:, None].repeat(8, axis=1)
+    img[:, 2:10] = event_panel(np.maximum(ramp, 0.0), np.maximum(-ramp, 0.0))
+    marks = [(f"+{scale:.3g} ON", 8), (f"-{scale:.3g} OFF", height - 2)] + ([("0", height // 2 + 3)]
+                                                                          if height >= 40 else [])
+    for txt, y in marks:
+        cv2.putText(img, txt, (12, y), PANEL_FONT, 0.3, (230, 230, 230), 1, cv2.LINE_AA)
+    return img
+
+
+def event_scale(p_on: np.ndarray, p_off: np.ndarray) -> float:
+    """The largest net contrast ``|P_on - P_off|`` of a bin (the event panel's scale is the movie's largest)."""
+    return float(np.max(np.abs(np.asarray(p_on, np.float64) - np.asarray(p_off, np.float64)), initial=0.0))
+
+
+def input_panel(item: Any, scale: float = 1.0) -> np.ndarray:
+    """The input panel of one step, with its colour bar: the grey frame, or an event bin
+    (:func:`event_panel`, full colour at net contrast ``scale``)."""
+    if isinstance(item, tuple):
+        img = event_panel(*item, scale=scale)
+        _label(img, "events")
+        return np.concatenate([img, event_bar(img.shape[0], scale)], 1)
+    grey = to_grey(item)
+    g8 = grey if grey.dtype == np.uint8 else np.clip(np.rint(grey * 255), 0, 255).astype(np.uint8)
+    img = cv2.cvtColor(g8, cv2.COLOR_GRAY2BGR)
+    _label(img, "input")
+    return np.concatenate([img, _GREY_SCALE.bar(g8.shape[0])], 1)
+
 
 def _label(img: np.ndarray, text: str) -> None:
     cv2.rectangle(img, (0, 0), (min(img.shape[1], 9 * len(text) + 8), 18), (0, 0, 0), -1)
@@ -176,8 +261,10 @@ def _label(img: np.ndarray, text: str) -> None:
 
 
 def _trace_panel(width: int, t: int, n_total: int | None, out: list[float], thr: list[float | None],
-                 spikes: list[bool], name: str, fps: float, window: tuple[int, int] | None) -> np.ndarray:
-    """The output so far (white), its threshold (dashed yellow), alerts (red) over frames 0..n_total."""
+                 spikes: list[bool], name: str, fps: float, window: tuple[int, int] | None,
+                 unit: str = "frame") -> np.ndarray:
+    """The output so far (white), its threshold (dashed yellow), alerts (red) over frames 0..n_total
+    (``unit``: what a step is called, ``"frame"``, or ``"bin"`` for an event recording)."""
     h = TRACE_H
     img = np.full((h, width, 3), 24, np.uint8)
     n = max(n_total or 0, t + 1, 2)
@@ -214,7 +301,7 @@ def _trace_panel(width: int, t: int, n_total: int | None, out: list[float], thr:
             cv2.line(img, (X(i), y1 - 10), (X(i), y1), (0, 0, 255), 2)
     cv2.line(img, (X(t), y0), (X(t), y1), (0, 255, 0), 1)
     alert = bool(spikes and spikes[-1])
-    cv2.putText(img, f"{name}  frame {t}  t={t / fps:.2f}s  (x axis: frames; purple: labelled window)", (x0, 16),
+    cv2.putText(img, f"{name}  {unit} {t}  t={t / fps:.2f}s  (x axis: {unit}s; purple: labelled window)", (x0, 16),
                 PANEL_FONT, 0.42, (255, 255, 255), 1, cv2.LINE_AA)
     cv2.putText(img, "-- threshold", (x0 + 4, y0 + 12), PANEL_FONT, 0.35, (0, 220, 255), 1, cv2.LINE_AA)
     if alert:
@@ -231,17 +318,17 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
     ----------
     model : Model
         A cdnf_ti model (reset here).
-    frames : iterator of ndarray
-        Grey frames (uint8 or float in [0, 1]).
+    frames : iterator of ndarray or of (p_on, p_off)
+        Grey frames (uint8 or float in [0, 1]), or event bins (:meth:`~cdnf_ti.models.base.Model.step_on_off`).
     fps : float
-        Input frame rate (frames/s), for the time labels.
+        Input frame rate (frames/s; bins/s for events), for the time labels.
     n_total : int, optional
         Number of frames (fixes the trace's x axis).
     window : (int, int), optional
         The labelled collision window (frames), shaded in the trace.
     ranges : dict, optional
-        ``{field: (lo, hi)}``, the fixed colour scales (:func:`field_ranges`); without it each
-        scale grows with the values seen so far.
+        ``{field: (lo, hi)}``, the fixed colour scales (:func:`field_ranges`; ``"events"``: the
+        event panel's); without it each scale grows with the values seen so far.
     """
     model.reset()
     out: list[float] = []
@@ -249,6 +336,7 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
     spikes: list[bool] = []
     scales: dict[str, FieldScale] = {}
     uses_count = False
+    ev_scale = 0.0
     n_ts = getattr(model.params, "n_ts", None)
     bar = None
     if progress:
@@ -256,10 +344,7 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
                    disable=None)
     try:
         for t, frame in enumerate(frames):
-            grey = to_grey(frame)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", NotConvergedWarning)  # recorded per frame in "converged"
-                res = model.step(grey)
+            res = _step(model, frame)
             if "count" in res.diagnostics and n_ts is not None:
                 uses_count = True
                 out.append(float(res.diagnostics["count"]))
@@ -269,25 +354,28 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
                 dyn = res.diagnostics.get("dyn_threshold")
                 thr.append(float(dyn) if dyn is not None else model.threshold)
             spikes.append(bool(res.spike))
-            g8 = grey if grey.dtype == np.uint8 else np.clip(np.rint(grey * 255), 0, 255).astype(np.uint8)
-            grey_panel = cv2.cvtColor(g8, cv2.COLOR_GRAY2BGR)
-            _label(grey_panel, "input")
-            panels = [np.concatenate([grey_panel, _GREY_SCALE.bar(g8.shape[0])], 1)]
+            if isinstance(frame, tuple):
+                ev = (ranges or {}).get(EVENTS_KEY)
+                ev_scale = max(ev_scale, ev[1] if ev else event_scale(*frame))  # fixed, or the largest so far
+            first = input_panel(frame, ev_scale or 1.0)
+            hw = (first.shape[0], first.shape[1] - CBAR_W)  # the input's (H, W)
+            panels = [first]
             fields = model.fields()
             for key, title in _pick_fields(model.name, fields):
                 if key not in scales:
                     scales[key] = FieldScale(*ranges[key]) if ranges and key in ranges else FieldScale()
                 sc = scales[key]
                 img = sc(fields[key])
-                if img.shape[:2] != g8.shape:
-                    img = cv2.resize(img, (g8.shape[1], g8.shape[0]), interpolation=cv2.INTER_NEAREST)
+                if img.shape[:2] != hw:
+                    img = cv2.resize(img, (hw[1], hw[0]), interpolation=cv2.INTER_NEAREST)
                 _label(img, title)
-                panels.append(np.concatenate([img, sc.bar(g8.shape[0])], 1))
+                panels.append(np.concatenate([img, sc.bar(hw[0])], 1))
             while len(panels) < 4:
                 panels.append(np.zeros_like(panels[0]))
             top = np.concatenate([np.concatenate(panels[:2], 1), np.concatenate(panels[2:4], 1)], 0)
             name = f"{model.name} spike count (n_ts {n_ts})" if uses_count else f"{model.name} {model.output_name}"
-            trace = _trace_panel(top.shape[1], t, n_total, out, thr, spikes, name, fps, window)
+            trace = _trace_panel(top.shape[1], t, n_total, out, thr, spikes, name, fps, window,
+                                 "bin" if isinstance(frame, tuple) else "frame")
             movie = np.concatenate([top, trace], 0)
             if movie.shape[0] % 2 or movie.shape[1] % 2:  # even sizes for MPEG-4
                 movie = movie[: movie.shape[0] // 2 * 2, : movie.shape[1] // 2 * 2]
@@ -301,24 +389,29 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
 
 def render_video(source: str | Path, model_name: str, out: str | Path, params: Any = None, backend: str = "taichi",
                  arch: str = "cpu", window: tuple[int, int] | None = None, progress: bool | str = False,
-                 fps: float | None = None, color_order: str = "bgr", rain: Any = None, rain_seed: int = 0) -> int:
+                 fps: float | None = None, color_order: str = "bgr", rain: Any = None, rain_seed: int = 0,
+                 events: dict | None = None) -> int:
     """Render the field movie of ``model_name`` on ``source`` to ``out`` (.mp4 or .avi); returns the frame count.
 
     Two passes over the input: the first fixes the colour scales (:func:`field_ranges`), the
     second draws. ``fps``/``color_order`` are how a file is read; ``rain`` (a
     :class:`~cdnf_ti.stimuli.rain.RainParams`) adds the same synthetic rain (seed ``rain_seed``)
-    in both passes.
+    in both passes. An event recording is binned as ``events`` says (``sensor_size``, ``bin_ms``,
+    ``event_threshold``: :func:`cdnf_ti.cli_common.event_options_of`), one movie frame per bin.
 
     Raises
     ------
     InputError
-        Unreadable input, or a video the codec cannot write.
+        Unreadable input, a video the codec cannot write, or rain asked on an event recording.
     UserError
         ``window`` is not ``0 <= start <= end <=`` the input's last frame, or the frames are
         smaller than the widest kernel.
     """
     codec_for(out)  # a bad suffix fails before any work
-    src = resolve_input(source, fps=fps, color_order=color_order)
+    src = open_render_input(source, fps, color_order, events)
+    is_events = isinstance(src, EventSource)
+    if is_events and rain is not None:
+        raise InputError(source, "is an event recording; --rain applies to frames only")
     check_frame_size(*src.shape, n_models=1, what=str(source))
     if window is not None:
         last = src.n_frames - 1 if src.n_frames else None
@@ -326,15 +419,40 @@ def render_video(source: str | Path, model_name: str, out: str | Path, params: A
             raise UserError(f"{source}: window {window[0]}:{window[1]} must satisfy 0 <= START <= END <= "
                             f"{'the last frame' if last is None else last} (frames, inclusive)")
     model = create_model(model_name, params, backend=backend, arch=arch, fps=src.fps)
+    threshold = float((events or {}).get("event_threshold", DEFAULT_EVENT_THRESHOLD))
 
     def frames():
+        if is_events:
+            return src.contrast(threshold)
         grey = iter_grey(src)
         return iter(RainyFrames(grey, rain, seed=rain_seed)) if rain is not None else grey
 
-    ranges = field_ranges(model, frames(), f"{progress} (colour scales)" if isinstance(progress, str) else False,
-                          src.n_frames)
-    movie = render_frames(model, frames(), src.fps, src.n_frames, window, progress, ranges)
-    return write_video(out, movie, src.fps)
+    seen = [0]
+
+    def counted(items):
+        for item in items:
+            seen[0] += 1
+            yield item
+
+    ranges = field_ranges(model, counted(frames()),
+                          f"{progress} (colour scales)" if isinstance(progress, str) else False, src.n_frames)
+    n_total = src.n_frames if src.n_frames is not None else seen[0]  # a recording's bins: counted in pass 1
+    movie = render_frames(model, frames(), src.fps, n_total, window, progress, ranges)
+    n = write_video(out, movie, src.fps)
+    if is_events:
+        for line in src.report.problems():
+            print(f"warning: {source}: {line}", file=sys.stderr)
+    return n
+
+
+def open_render_input(source: str | Path, fps: float | None = None, color_order: str = "bgr",
+                      events: dict | None = None, quiet: bool = False) -> Any:
+    """The input of a movie: an :class:`~cdnf_ti.events.source.EventSource` for an event recording
+    (binned as ``events`` says), else a frame source (:func:`~cdnf_ti.inputs.resolve_input`)."""
+    if is_event_file(source):
+        ev = events or {}
+        return open_event_source(source, ev.get("sensor_size"), ev.get("bin_ms", DEFAULT_BIN_MS), quiet=quiet)
+    return resolve_input(source, fps=fps, color_order=color_order)
 
 
 def movie_name(clip: str, model: str, condition: str = "clean", suffix: str = ".mp4") -> str:
@@ -350,15 +468,18 @@ def render_main(argv: Sequence[str]) -> int:
                     "colour bars of fixed scale) and its output trace with threshold and alert, side by side. "
                     "One movie per model and condition (--model cdnf,lgmd2; --rain both): "
                     "OUT/<clip>.<model>[.rain].mp4.")
-    ap.add_argument("input", metavar="VIDEO", help="video file, image folder, .npy or stim:NAME")
+    ap.add_argument("input", metavar="VIDEO",
+                    help="video file, image folder, .npy, stim:NAME, or an event recording (one movie frame per bin; "
+                         "the input panel shows the bin's ON events green and OFF events red)")
     add_output_option(ap, movie=True)
     add_model_options(ap)
     add_param_options(ap)
     add_input_options(ap)
-    add_rain_options(ap, default="off", what="the input")
+    add_event_options(ap)
+    add_rain_options(ap, default="off", what="the input (frames only)")
     add_seed_options(ap, rain=True)
     ap.add_argument("--window", default=None, metavar="START:END",
-                    help="labelled collision window in frames, shaded in the trace")
+                    help="labelled collision window in frames (bins for an event recording), shaded in the trace")
     ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     args = ap.parse_args(list(argv))
     models = parse_models(args.models)
@@ -373,7 +494,11 @@ def render_main(argv: Sequence[str]) -> int:
         except ValueError:
             raise UserError(f"--window must be START:END in frames, got {args.window!r}") from None
         window = (a, b)
-    clip = resolve_input(args.input, fps=args.fps, color_order=args.color_order).name
+    events = event_options_of(args)
+    src = open_render_input(args.input, args.fps, args.color_order, events, quiet=True)
+    if isinstance(src, EventSource) and "rain" in conditions:
+        raise InputError(args.input, "is an event recording; --rain applies to frames only (give --rain off)")
+    clip = src.name
     jobs = [(m, c) for m in models for c in conditions]
     out = Path(args.out)
     if out.suffix:  # a movie file
@@ -391,18 +516,19 @@ def render_main(argv: Sequence[str]) -> int:
         label = f"render {Path(str(args.input)).name} [{m}{'' if c == 'clean' else ', ' + c}]"
         n = render_video(args.input, m, target, params=params[m], backend=args.backend, arch=args.arch, window=window,
                          progress=False if args.no_progress else label, fps=args.fps, color_order=args.color_order,
-                         rain=rain if c == "rain" else None, rain_seed=rain_seed_of(args))
+                         rain=rain if c == "rain" else None, rain_seed=rain_seed_of(args), events=events)
         print(f"{target}: {n} frames", file=sys.stderr)
     return EXIT_OK
 
 
 def render_dataset(run: Any, folder: str | Path, progress: bool = False, params: dict | None = None,
                    fps: float | None = None, color_order: str = "bgr", backend: str = "taichi",
-                   arch: str = "cpu") -> list[Path]:
+                   arch: str = "cpu", events: dict | None = None) -> list[Path]:
     """Field movies of every scored clip of a dataset run: ``OUT/movies/<clip>.<model>.mp4`` (clean input).
 
     ``params`` (``{model: parameter object or None}``), ``fps`` and ``color_order`` are the run's
-    own (``--param``, ``--fps``, ``--color-order``), so a movie shows the model that was scored.
+    own (``--param``, ``--fps``, ``--color-order``; ``events``: how event recordings are binned,
+    :func:`cdnf_ti.cli_common.event_options_of`), so a movie shows the model that was scored.
     A movie newer than its trace is kept (a rerun does not redraw it).
     """
     made = []
@@ -422,6 +548,6 @@ def render_dataset(run: Any, folder: str | Path, progress: bool = False, params:
             window = (lab.window_start, lab.window_end) if lab.collision else None
             render_video(video, m, movie, params=(params or {}).get(m), backend=backend, arch=arch, window=window,
                          progress=f"movie {lab.clip} [{m}]" if progress else False, fps=fps,
-                         color_order=color_order)
+                         color_order=color_order, events=events)
             made.append(movie)
     return made

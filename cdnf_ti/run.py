@@ -42,6 +42,7 @@ from .cli_common import (
     EXIT_OK as EXIT_OK,
     EXIT_USAGE as EXIT_USAGE,
     ArgumentParser,
+    add_event_options,
     add_input_options,
     add_model_options as add_model_options,
     add_output_option,
@@ -61,7 +62,6 @@ from .cli_common import (
     unique_names as unique_names,
 )
 from .errors import InputError, UserError
-from .events.cli import add_event_options
 from .events.readers import is_event_file
 from .events.source import EventSource, open_event_source
 from .experiments.parallel import exit_on_second_interrupt, stop_all_pools

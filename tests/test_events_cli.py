@@ -83,15 +83,6 @@ def test_running_the_models_on_an_event_file_gives_one_trace_row_per_bin_and_its
             assert len(list(csv.DictReader(fh))) == n_bins, name
 
 
-def test_render_takes_frames_only_and_points_to_run_for_an_event_file(tmp_path, capsys):
-    f = tmp_path / "ev.npy"
-    np.save(f, random_events(100, (64, 48), seed=2))
-    assert main(["render", str(f), "--out", str(tmp_path / "out")]) == 2
-    err = capsys.readouterr().err
-    assert err.count("error:") == 1 and f"error: {f}: is an event-camera recording" in err
-    assert "'python -m cdnf_ti.run FILE' runs the models on it" in err
-
-
 def test_info_on_a_folder_reports_every_recording_in_it(tmp_path, capsys):
     for i in range(2):
         np.save(tmp_path / f"rec{i}.npy", random_events(50, (64, 48), seed=i))

@@ -26,51 +26,21 @@ from ..cli_common import (
     EXIT_OK,
     EXIT_USAGE,
     ArgumentParser,
+    add_event_options,
     add_input_options,
+    non_negative_float,
     positive_float,
     seed_arg,
+    sensor_size_arg,
     unique_names,
 )
 from ..errors import UserError
 from ..frames import iter_grey
 from ..inputs import STIM_PREFIX, parse_stim_spec, resolve_input, stimulus_label
-from .binning import DEFAULT_BIN_MS, DEFAULT_EVENT_THRESHOLD
 from .emulator import EmulatorParams, emulate
-from .readers import is_event_file, parse_sensor_size
+from .readers import is_event_file
 from .source import open_event_source
 from .writers import WRITE_EXTENSIONS, write_events
-
-
-def sensor_size_arg(text: str) -> tuple[int, int]:
-    """argparse type: ``WxH``."""
-    try:
-        return parse_sensor_size(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
-
-
-def non_negative_float(text: str) -> float:
-    """argparse type: a finite number >= 0."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not (np.isfinite(v) and v >= 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
-    return v
-
-
-def add_event_options(ap: argparse.ArgumentParser) -> None:
-    """``--sensor-size``, ``--bin-ms``, ``--event-threshold``: how an event recording becomes model input."""
-    ap.add_argument("--sensor-size", type=sensor_size_arg, default=None, metavar="WxH",
-                    help="sensor size of event recordings (default: the file's header; else the smallest that "
-                         "holds every event)")
-    ap.add_argument("--bin-ms", type=positive_float, default=DEFAULT_BIN_MS,
-                    help="events are binned into frames this long, ms (default: 1000/30 = 33.333..., one 30 fps "
-                         "frame)")
-    ap.add_argument("--event-threshold", type=positive_float, default=DEFAULT_EVENT_THRESHOLD, metavar="C",
-                    help="the sensor's log-contrast threshold C: n events at a pixel in a bin give the models a "
-                         "contrast min(1, n C) (default: %(default)s); for 'events VIDEO' the emulated threshold")
 
 
 def _parser() -> argparse.ArgumentParser:

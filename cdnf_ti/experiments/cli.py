@@ -21,6 +21,7 @@ from ..atomic import output_lock, prepare_output
 from ..cli_common import (
     RAIN_ENGINE_WORD,
     ArgumentParser,
+    add_event_options,
     add_input_options,
     add_model_options,
     add_output_option,
@@ -28,6 +29,8 @@ from ..cli_common import (
     add_rain_options,
     add_seed_options,
     check_model_options,
+    event_options_of,
+    given_event_options,
     note,
     note_unused_rain_options,
     params_from_args,
@@ -36,13 +39,14 @@ from ..cli_common import (
     stimulus_seed_of,
 )
 from ..errors import InputError, UserError
+from ..events.readers import is_event_file
 from ..limits import check_frame_size
 from ..render import render_dataset
 from ..stimuli.basic import BASIC_STIMULI
 from ..stimuli.incoherent import SCATTERS
 from . import builtin
 from .dataset import run_dataset
-from .labels import drop_missing, read_labels
+from .labels import drop_missing, find_clip, read_labels
 from .paramsweep import run_param_sweep
 from .reports import pct, table2_markdown
 from .scoring import Padding
@@ -84,7 +88,9 @@ def _add_dataset_options(ap: argparse.ArgumentParser, rain_default: str, one_mod
     if not one_model:  # (the sweep sets its parameters with its own grid --param)
         add_param_options(ap)
     add_input_options(ap)
-    add_rain_options(ap, default=rain_default, what="each clip", drops=not one_model)
+    add_event_options(ap)
+    add_rain_options(ap, default=rain_default, what="each clip (videos; rain applies to frames only, not to "
+                                                      "event recordings)", drops=not one_model)
     ap.add_argument("--skip-missing", action="store_true",
                     help="run the clips whose video exists and leave out label rows naming a missing video "
                          "(a note lists them; default: a missing video is an error and nothing runs)")
@@ -113,17 +119,38 @@ def _skip_missing(args, folder: Path) -> None:
         raise InputError(labels_path, f"no labelled clip has a video in {folder}")
 
 
+def _note_event_options(args, folder: Path) -> None:
+    """A ``note:`` for options that do not apply to the clips of ``folder``: event options without any
+    event recording, ``--fps``/``--color-order`` with event recordings only (their rate is 1000 / --bin-ms)."""
+    labels_path = Path(args.labels) if args.labels else folder / "labels.csv"
+    try:
+        labels = read_labels(labels_path)
+    except InputError:
+        return  # reported by the run itself
+    files = [f for f in (find_clip(folder, lab.clip) for lab in labels) if f is not None]
+    n_events = sum(1 for f in files if is_event_file(f))
+    given = given_event_options(args)
+    if given and files and not n_events:
+        note(f"{' and '.join(given)} change(s) nothing: no labelled clip in {folder} is an event recording")
+    frame_opts = [o for o, d in (("--fps", args.fps is not None), ("--color-order", args.color_order != "bgr")) if d]
+    if frame_opts and files and n_events == len(files):
+        note(f"{' and '.join(frame_opts)} change(s) nothing: every labelled clip in {folder} is an event recording "
+             f"(bins of --bin-ms, {1000.0 / args.bin_ms:g} per second)")
+
+
 def _dataset(args, folder: Path, out: Path) -> int:
     note_unused_rain_options(args)
     models = parse_models(args.models)
     check_model_options(args)
     params = params_from_args(args, models)
     _skip_missing(args, folder)
+    _note_event_options(args, folder)
     run = run_dataset(folder, args.labels, out, models=models, rain=RAIN_ENGINE_WORD[args.rain],
                       padding=Padding(args.pad_before, args.pad_after), seed=rain_seed_of(args),
                       workers=args.workers, scheduler=args.scheduler, backend=args.backend, arch=args.arch,
                       progress=not args.no_progress, figures=not args.no_figures, rain_params=_rain_params(args),
-                      params=params, fps=args.fps, color_order=args.color_order, skip_missing=args.skip_missing)
+                      params=params, fps=args.fps, color_order=args.color_order, skip_missing=args.skip_missing,
+                      events=event_options_of(args))
     print(table2_markdown(run.summary["results"], run.models, run.conditions))
     for line in headline(run):
         print(line)
@@ -138,7 +165,8 @@ def _dataset(args, folder: Path, out: Path) -> int:
 
     if getattr(args, "render", False):
         movies = render_dataset(run, folder, progress=not args.no_progress, params=params, fps=args.fps,
-                                color_order=args.color_order, backend=args.backend, arch=args.arch)
+                                color_order=args.color_order, backend=args.backend, arch=args.arch,
+                                events=event_options_of(args))
         print(f"{len(movies)} field movies in {out}/movies/", file=sys.stderr)
     if run.failed:
         print(f"{run.n_errors} of {len(run.rows)} clip x model x condition run(s) failed; see {out}/results.csv",
@@ -172,13 +200,14 @@ def _param_sweep(args) -> int:
     if not folder.is_dir():
         raise InputError(folder, "dataset folder not found")
     _skip_missing(args, folder)
+    _note_event_options(args, folder)
     run = run_param_sweep(folder, args.labels, Path(args.out), models[0], args.param,
                           rain=RAIN_ENGINE_WORD[args.rain], padding=Padding(args.pad_before, args.pad_after),
                           seed=rain_seed_of(args), folds=args.folds,
                           workers=args.workers, scheduler=args.scheduler, backend=args.backend, arch=args.arch,
                           progress=not args.no_progress, figures=not args.no_figures, downscale=args.downscale,
                           html=not args.no_html, fps=args.fps, color_order=args.color_order,
-                          skip_missing=args.skip_missing)
+                          skip_missing=args.skip_missing, events=event_options_of(args))
     print((Path(args.out) / "param_sweep.md").read_text(encoding="utf-8"))
     print(f"{len(run.settings)} settings x {len(run.conditions)} conditions: {run.ran} tasks run now, "
           f"{run.skipped} reused; results in {args.out}/", file=sys.stderr)
@@ -191,10 +220,13 @@ def dataset_main(argv: Sequence[str]) -> int:
     """``python -m cdnf_ti.run dataset DIR --labels CSV --out OUT [...]``."""
     ap = ArgumentParser(
         prog="python -m cdnf_ti.run dataset",
-        description="Run models on every labelled clip of a folder (clean and/or with synthetic rain), score "
+        description="Run models on every labelled clip of a folder (videos, clean and/or with synthetic rain; "
+                    "event recordings, binned), score "
                     "them (docs/EVALUATION.md) and write traces, results.csv, summary.md/json and "
                     "figures. Rerunning with the same OUT skips finished work.")
-    ap.add_argument("folder", metavar="DIR", help="folder of videos")
+    ap.add_argument("folder", metavar="DIR",
+                    help="folder of videos and/or event recordings (README, 'Event cameras': a recording's frames "
+                         "are its bins of --bin-ms, and its labels count bins)")
     add_output_option(ap, default="cdnf_out/dataset")
     ap.add_argument("--render", action="store_true",
                     help="also write a field movie of each scored clip and model (OUT/movies/<clip>.<model>.mp4)")
@@ -238,8 +270,13 @@ def experiment_main(argv: Sequence[str]) -> int:
     ap = ArgumentParser(prog="python -m cdnf_ti.run experiment",
                         description="Regenerate the paper's experiments.")
     sub = ap.add_subparsers(dest="which", required=True, metavar="{table1,coherence,selectivity,table2,sweep}")
-    p1 = sub.add_parser("table1", help="basic selectivity on the six basic stimuli (Table I, Fig. 2)")
-    p2 = sub.add_parser("coherence", help="coherence sweep on the six incoherent stimuli (Fig. 4)")
+    on_frames = ("It runs on frames drawn in memory; for the event versions of the stimuli, emulate them "
+                 "('python -m cdnf_ti.run events stim:NAME --out DIR') and run the recordings with 'run' or "
+                 "'dataset'.")
+    p1 = sub.add_parser("table1", help="basic selectivity on the six basic stimuli (Table I, Fig. 2)",
+                        description="Basic selectivity on the six basic stimuli (Table I, Fig. 2). " + on_frames)
+    p2 = sub.add_parser("coherence", help="coherence sweep on the six incoherent stimuli (Fig. 4)",
+                        description="Coherence sweep on the six incoherent stimuli (Fig. 4). " + on_frames)
     for p, name in ((p1, "table1"), (p2, "coherence")):
         add_output_option(p, default=f"cdnf_experiments/{name}")
         add_model_options(p, default_models="all")
@@ -256,7 +293,9 @@ def experiment_main(argv: Sequence[str]) -> int:
                     help="incoherent construction: displaced dots vanish with their leaving source and reappear "
                          "elsewhere (flicker, default) or pass to an entering source and stay put (static)")
     p4 = sub.add_parser("selectivity", help="every model against Table I over a grid of stimulus settings "
-                                             "(sizes, speeds, grey levels, gratings, coherences)")
+                                             "(sizes, speeds, grey levels, gratings, coherences)",
+                        description="Every model against Table I over a grid of stimulus settings (sizes, speeds, "
+                                    "grey levels, gratings, coherences). " + on_frames)
     add_output_option(p4, default="cdnf_experiments/selectivity")
     add_model_options(p4, default_models="all")
     add_param_options(p4)
@@ -272,13 +311,13 @@ def experiment_main(argv: Sequence[str]) -> int:
     _add_parallel(p4, stimulus=True)
     p3 = sub.add_parser("table2", help="accuracy on a labelled folder, clean and with synthetic rain (Table II)")
     p3.add_argument("folder", nargs="?", default=None, metavar="DIR",
-                    help="folder of videos with labels.csv (default: the development clips, shared/data/real "
-                         "beside the repository, when present)")
+                    help="folder of videos and/or event recordings with labels.csv (default: the development "
+                         "clips, shared/data/real beside the repository, when present)")
     add_output_option(p3, default="cdnf_experiments/table2")
     _add_dataset_options(p3, rain_default="both")
     p4 = sub.add_parser("sweep", help="a grid of ONE model's parameters over a labelled folder: accuracy, "
                                       "ROC AUC and cross-validated accuracy per setting")
-    p4.add_argument("folder", metavar="DIR", help="folder of videos with labels.csv")
+    p4.add_argument("folder", metavar="DIR", help="folder of videos and/or event recordings with labels.csv")
     add_output_option(p4, default="cdnf_experiments/sweep")
     p4.add_argument("--param", action="append", default=[], metavar="NAME=SPEC",
                     help="a parameter of the model and its values: NAME=START:STOP:N (N values, ends included), "

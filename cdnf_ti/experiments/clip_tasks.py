@@ -1,7 +1,10 @@
 """The clip engine: models on labelled clips, clean or with synthetic rain, for ``dataset`` and ``experiment sweep``.
 
 One unit of work (:class:`ClipTask`) decodes a clip once (and rains on it once)
-for several models; each (clip, model, condition) is one cache entry of
+for several models; a clip that is an event recording (:func:`~cdnf_ti.events.readers.is_event_file`)
+is binned once instead (``--bin-ms``, ``--event-threshold``, ``--sensor-size``) and every model
+takes its bins through its ON/OFF input stage (:meth:`~cdnf_ti.models.base.Model.step_on_off`).
+Each (clip, model, condition) is one cache entry of
 :mod:`.tasks`, saved as ``<out>/traces/<condition>/<clip>.<model>.csv`` and its
 record ``.json`` beside it (:mod:`.layout`). A parameter sweep runs the same
 units with one model setting each (:class:`SweepTask`), under
@@ -15,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import sys
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -24,6 +28,9 @@ from typing import Any, Callable, Sequence
 import cv2
 
 from ..errors import InputError, UserError
+from ..events.binning import DEFAULT_BIN_MS, DEFAULT_EVENT_THRESHOLD
+from ..events.readers import is_event_file, open_events
+from ..events.source import EventSource, open_event_source
 from ..frames import iter_grey, open_source
 from ..limits import check_frame_size
 from ..models import create_model, get_model_class
@@ -66,6 +73,9 @@ class ClipTask:
     key : str
         The setting's name in a parameter sweep (:func:`cdnf_ti.experiments.paramsweep.setting_key`);
         empty for a dataset run. A sweep's fingerprints hold the setting and the downscale factor.
+    sensor_size, bin_ms, event_threshold :
+        How an event recording is binned and scaled (``--sensor-size``, ``--bin-ms``,
+        ``--event-threshold``); unused for a video. An event clip's fingerprints hold all three.
     """
 
     clip: str
@@ -83,12 +93,27 @@ class ClipTask:
     setting: tuple = ()
     downscale: float = 1.0
     key: str = ""
+    sensor_size: tuple[int, int] | None = None
+    bin_ms: float = DEFAULT_BIN_MS
+    event_threshold: float = DEFAULT_EVENT_THRESHOLD
+
+    @property
+    def events(self) -> bool:
+        """Whether the clip is an event recording (binned) rather than frames."""
+        return is_event_file(self.path)
 
     def fingerprint(self, model: str) -> dict:
         """The fingerprint of ``model``'s result (:func:`.layout.fingerprint`; a sweep adds
-        ``params`` and ``downscale``)."""
+        ``params`` and ``downscale``; an event recording adds ``bin_ms``, ``event_threshold`` and
+        ``sensor_size``, and leaves out ``--fps`` and ``--color-order``, which do not apply to it)."""
+        events = self.events
+        options = (run_options(model, self.params, None, "bgr") if events
+                   else run_options(model, self.params, self.fps, self.color_order))
         fp = fingerprint(self.path, self.condition, model, self.seed, self.backend, self.rain_params, self.arch,
-                         run_options(model, self.params, self.fps, self.color_order))
+                         options)
+        if events:
+            fp.update(bin_ms=float(self.bin_ms), event_threshold=float(self.event_threshold),
+                      sensor_size=None if self.sensor_size is None else list(self.sensor_size))
         if self.key:
             fp.update(params={k: v for k, v in self.setting}, downscale=self.downscale)
         return fp
@@ -122,8 +147,32 @@ def _resized(frames, factor: float):
         yield cv2.resize(f, (max(2, round(w * factor)), max(2, round(h * factor))), interpolation=cv2.INTER_AREA)
 
 
+def _resized_bins(bins, factor: float):
+    """Event bins ``(p_on, p_off)`` resized as frames are (area average of each channel: the model's net
+    contrast ``p_on - p_off`` is then the area average of the full-size one, as for frames)."""
+    for p_on, p_off in bins:
+        h, w = p_on.shape
+        size = (max(2, round(w * factor)), max(2, round(h * factor)))
+        yield (cv2.resize(p_on, size, interpolation=cv2.INTER_AREA),
+               cv2.resize(p_off, size, interpolation=cv2.INTER_AREA))
+
+
+def _open(task: ClipTask):
+    """The task's input: an :class:`~cdnf_ti.events.source.EventSource` for an event recording,
+    else a frame source."""
+    if task.events:
+        if task.condition != "clean":
+            raise InputError(task.path, "is an event recording; --rain applies to frames only")
+        return open_event_source(task.path, task.sensor_size, task.bin_ms, quiet=True)
+    return open_source(task.path, fps=task.fps, color_order=task.color_order)
+
+
 def _frames(task: ClipTask, src):
-    """The frame stream of a task (grey; rainy for the rain condition; resized) and the rain object."""
+    """The frame stream of a task (grey; rainy for the rain condition; resized) and the rain object;
+    for an event recording, its bins ``(p_on, p_off)`` (resized)."""
+    if isinstance(src, EventSource):
+        bins = src.contrast(task.event_threshold)
+        return (_resized_bins(bins, task.downscale) if task.downscale != 1.0 else bins), None
     frames = iter_grey(src)
     rain = None
     if task.condition != "clean":
@@ -164,7 +213,7 @@ def run_clip_task(task: ClipTask) -> list[dict]:
         return [dict(base, model=m, error=msg.splitlines()[0] if msg else type(e).__name__) for m in names]
 
     try:
-        src = open_source(task.path, fps=task.fps, color_order=task.color_order)
+        src = _open(task)
         try:
             check_frame_size(*src.shape, n_models=len(task.models), what=str(task.path))
         except UserError as e:  # frames smaller than the widest kernel: that clip's error rows
@@ -197,6 +246,7 @@ def run_clip_task(task: ClipTask) -> list[dict]:
         if rain is not None and errors.count(None):
             s = getattr(rain, "snr_db", None)
             snr = None if s is None or not math.isfinite(float(s)) else float(s)
+        problems = src.report.problems() if isinstance(src, EventSource) else []
         for name, trace, err in zip(names, traces, errors):
             if err is not None or trace is None:
                 records.update((r["model"], r) for r in failed([name], err or RuntimeError("no trace")))
@@ -210,6 +260,9 @@ def run_clip_task(task: ClipTask) -> list[dict]:
                 source=str(task.path), seed=task.seed if rain is not None else None,
                 rain_seed=rain_seed(task.seed, task.clip) if rain is not None else None, error="",
             )
+            if isinstance(src, EventSource):
+                meta.update(bin_ms=task.bin_ms, event_threshold=task.event_threshold,
+                            sensor_size=list(src.sensor_size), event_warnings=problems)
             if task.key:
                 meta["setting"] = {k: v for k, v in task.setting}
             entry = task.entry(name)
@@ -237,7 +290,8 @@ def run_clips(clips: Sequence[tuple[str, str]], out: str | os.PathLike, models: 
               conditions: Sequence[str], seed: int = 0, workers: int | None = None, scheduler: Any = None,
               backend: str = "taichi", arch: str = "cpu", progress: bool = True, rain_params: dict | None = None,
               on_record: Callable[[dict], None] | None = None, params: dict | None = None, fps: float | None = None,
-              color_order: str = "bgr") -> tuple[dict[tuple[str, str, str], dict], CachedRun]:
+              color_order: str = "bgr", sensor_size: tuple[int, int] | None = None, bin_ms: float = DEFAULT_BIN_MS,
+              event_threshold: float = DEFAULT_EVENT_THRESHOLD) -> tuple[dict[tuple[str, str, str], dict], CachedRun]:
     """Every clip x condition x model, reusing finished traces (the dataset engine).
 
     Parameters
@@ -249,8 +303,12 @@ def run_clips(clips: Sequence[tuple[str, str]], out: str | os.PathLike, models: 
     models, conditions : sequence of str
     seed, workers, scheduler, backend, arch, progress, rain_params, params, fps, color_order
         As :func:`cdnf_ti.experiments.dataset.run_dataset`.
+    sensor_size, bin_ms, event_threshold
+        How the clips that are event recordings are binned (``--sensor-size``, ``--bin-ms``,
+        ``--event-threshold``).
     on_record : callable, optional
-        Called in this process with each record computed now.
+        Called in this process with each record computed now (after a ``warning:`` line on stderr
+        for each problem found while binning an event recording).
 
     Returns
     -------
@@ -263,7 +321,8 @@ def run_clips(clips: Sequence[tuple[str, str]], out: str | os.PathLike, models: 
             for m in models:
                 keys.append((clip, m, cond))
                 tasks.append(ClipTask(clip, str(path), cond, (m,), str(out), seed, backend, arch, rain_params,
-                                      params=params, fps=fps, color_order=color_order))
+                                      params=params, fps=fps, color_order=color_order, sensor_size=sensor_size,
+                                      bin_ms=bin_ms, event_threshold=event_threshold))
 
     def plan(todo: list[int]) -> list[tuple[ClipTask, list[int]]]:
         groups: dict[tuple[str, str], list[int]] = {}
@@ -279,9 +338,69 @@ def run_clips(clips: Sequence[tuple[str, str]], out: str | os.PathLike, models: 
 
     run = run_cached([t.entry(t.models[0]) for t in tasks], plan, run_clip_task, failed=failed, workers=workers,
                      scheduler=scheduler, arch=arch, progress="clips" if progress else False,
-                     describe=describe_clip_task,
-                     on_record=None if on_record is None else (lambda i, r: on_record(r)))
+                     describe=describe_clip_task, on_record=lambda i, r: _arrived(r, on_record))
     return dict(zip(keys, run.records)), run
+
+
+def _arrived(record: dict, on_record: Callable[[dict], None] | None = None) -> None:
+    """A record computed now: print its binning problems (``warning: <file>: ...``), then hand it on."""
+    for line in record.get("event_warnings") or ():
+        print(f"warning: {record.get('source', record.get('clip'))}: {line}", file=sys.stderr)
+    if on_record is not None:
+        on_record(record)
+
+
+def event_clips(files: dict[str, str | os.PathLike]) -> list[str]:
+    """The clips (of ``{clip: file}``) that are event recordings, in order."""
+    return [clip for clip, f in files.items() if is_event_file(f)]
+
+
+def note_inferred_sensor_size(files: dict[str, str | os.PathLike], sensor_size: tuple[int, int] | None) -> None:
+    """A ``note:`` naming the event recordings whose sensor size is inferred from their events
+    (neither ``--sensor-size`` nor the file states one), as ``run`` says per file."""
+    if sensor_size is not None:
+        return
+    inferred = []
+    for clip in event_clips(files):
+        try:
+            if open_events(files[clip]).sensor_size is None:
+                inferred.append(clip)
+        except InputError:
+            continue  # a bad recording: its own error line when the run reaches it
+    if inferred:
+        shown = ", ".join(inferred[:5]) + (", ..." if len(inferred) > 5 else "")
+        print(f"note: {len(inferred)} event recording(s) state no sensor size ({shown}); each uses the smallest "
+              "that holds its events (give --sensor-size WxH to set it)", file=sys.stderr)
+
+
+def frames_only_conditions(files: dict[str, str | os.PathLike], conditions: Sequence[str],
+                           folder: str | os.PathLike) -> list[str]:
+    """The conditions a batch runs, given that synthetic rain applies to frames only.
+
+    Rain is drawn on frames; an event recording has none. When every clip is an event
+    recording, ``--rain both`` runs them clean (a ``note:`` says so).
+
+    Raises
+    ------
+    UserError
+        Rain is asked for the event recordings of a folder that also holds videos, or rain
+        only (``--rain on``) for a folder of event recordings.
+    """
+    if "rain" not in conditions:
+        return list(conditions)
+    ev = event_clips(files)
+    if not ev:
+        return list(conditions)
+    shown = ", ".join(ev[:5]) + (", ..." if len(ev) > 5 else "")
+    if len(ev) == len(files) and "clean" in conditions:
+        print(f"note: --rain applies to frames only; the {len(ev)} event recording(s) of {folder} run clean only",
+              file=sys.stderr)
+        return ["clean"]
+    what = ("every labelled clip in {} is an event recording" if len(ev) == len(files)
+            else f"{len(ev)} of the {len(files)} labelled clips in {{}} are event recordings").format(folder)
+    raise UserError(f"--rain applies to frames only, and {what} ({shown}); "
+                    f"run them with --rain off" + ("" if len(ev) == len(files) else
+                                                   " (or the videos and the recordings as separate folders)"))
 
 
 @dataclass(frozen=True)
@@ -304,6 +423,8 @@ class SweepTask:
         Frames are resized by this factor (1 = native size).
     fps, color_order :
         How the clip is read (``--fps``, ``--color-order``).
+    sensor_size, bin_ms, event_threshold :
+        How an event recording is binned (``--sensor-size``, ``--bin-ms``, ``--event-threshold``).
     """
 
     clip: str
@@ -319,13 +440,17 @@ class SweepTask:
     downscale: float = 1.0
     fps: float | None = None
     color_order: str = "bgr"
+    sensor_size: tuple[int, int] | None = None
+    bin_ms: float = DEFAULT_BIN_MS
+    event_threshold: float = DEFAULT_EVENT_THRESHOLD
 
     @property
     def clip_task(self) -> ClipTask:
         """The same work as a :class:`ClipTask` of one model under ``OUT/settings/<key>``."""
         return ClipTask(self.clip, self.path, self.condition, (self.model,), str(setting_folder(self.out, self.key)),
                         self.seed, self.backend, self.arch, None, fps=self.fps, color_order=self.color_order,
-                        setting=tuple(self.setting), downscale=float(self.downscale), key=self.key)
+                        setting=tuple(self.setting), downscale=float(self.downscale), key=self.key,
+                        sensor_size=self.sensor_size, bin_ms=self.bin_ms, event_threshold=self.event_threshold)
 
 
 def setting_folder(out: str | os.PathLike, key: str) -> Path:
@@ -372,7 +497,7 @@ def run_sweep(tasks: Sequence[SweepTask], workers: int | None = None, scheduler:
 
     return run_cached([t.clip_task.entry(t.model) for t in tasks], lambda todo: [(tasks[i], [i]) for i in todo],
                       run_sweep_task, failed=failed, workers=workers, scheduler=scheduler, arch=arch,
-                      progress=progress, describe=describe_sweep_task)
+                      progress=progress, describe=describe_sweep_task, on_record=lambda i, r: _arrived(r))
 
 
 @dataclass

@@ -29,10 +29,12 @@ from .clip_tasks import (
     ClipTask as ClipTask,  # re-exported: dataset.py was their home
     DatasetRun as DatasetRun,
     describe_clip_task as describe_task,
+    frames_only_conditions,
+    note_inferred_sensor_size,
     run_clip_task as run_clip_task,
     run_clips,
 )
-from .labels import ClipLabel, drop_missing, read_labels, unlabelled_videos, validate_dataset
+from .labels import ClipLabel, drop_missing, labels_in_frames, read_labels, unlabelled_videos, validate_dataset
 from .layout import (
     CONDITIONS as CONDITIONS,
     RAIN_CHOICES as RAIN_CHOICES,
@@ -81,13 +83,16 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
                 arch: str = "cpu", progress: bool = True, figures: bool = True,
                 rain_params: dict | None = None,
                 on_record: Callable[[dict], None] | None = None, params: dict | None = None,
-                fps: float | None = None, color_order: str = "bgr", skip_missing: bool = False) -> DatasetRun:
+                fps: float | None = None, color_order: str = "bgr", skip_missing: bool = False,
+                events: dict | None = None) -> DatasetRun:
     """Run ``models`` on every labelled clip of ``folder`` and write the reports.
 
     Parameters
     ----------
     folder : path-like
-        Folder of videos.
+        Folder of videos and/or event recordings (:func:`~cdnf_ti.events.readers.is_event_file`).
+        A recording is a clip whose frames are its bins: its labels count bins, bin ``k``
+        starting ``k * bin_ms / 1000`` s into the recording.
     labels_path : path-like or None
         Labels CSV (None: ``folder/labels.csv``).
     out : path-like
@@ -121,6 +126,10 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
     skip_missing : bool
         Run the clips whose video exists and leave out label rows that name a missing video
         (:func:`~cdnf_ti.experiments.labels.drop_missing`); by default a missing video is an error.
+    events : dict, optional
+        How event recordings are binned: ``sensor_size``, ``bin_ms``, ``event_threshold``
+        (:func:`cdnf_ti.cli_common.event_options_of`; default: the defaults). Rain applies to
+        frames only (:func:`~.clip_tasks.frames_only_conditions`).
 
     Raises
     ------
@@ -139,7 +148,9 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
     if skip_missing:
         labels, _ = drop_missing(labels, folder)
     files = validate_dataset(labels, folder, labels_path)
-    conditions = list(RAIN_CHOICES[rain])
+    labels = labels_in_frames(labels, files, fps, (events or {}).get("bin_ms"), labels_path)
+    conditions = frames_only_conditions(files, RAIN_CHOICES[rain], folder)
+    note_inferred_sensor_size(files, (events or {}).get("sensor_size"))
     models = list(dict.fromkeys(models))
     if not models:
         raise UserError("no model named")
@@ -150,7 +161,7 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
         try:
             return _run_locked(folder, labels_path, labels, files, out, models, conditions, padding, seed,
                                workers, scheduler, backend, arch, progress, figures, rain_params, on_record,
-                               dict(params=params, fps=fps, color_order=color_order))
+                               dict(params=params, fps=fps, color_order=color_order, **(events or {})))
         except KeyboardInterrupt:
             parallel.stop_all_pools()
             remove_stale_temps(out)  # the workers stopped mid-write leave no half-written files

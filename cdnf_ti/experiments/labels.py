@@ -2,26 +2,34 @@
 
 A labels file has one row per clip; columns are found by their header names
 (``clip,label,window_start,window_end[,contact_frame]``) and any other column
-is ignored. Every problem is an :class:`~cdnf_ti.errors.InputError` naming the
-file and the row (1-based line number in the file, the header being line 1),
-raised before any model work starts.
+is ignored. A window may instead be given in seconds from the clip's start
+(``window_start_s,window_end_s[,contact_s]``), row by row; :func:`labels_in_frames`
+turns it into frames at the clip's rate (an event recording's: ``1000 / bin_ms``
+bins per second), so the same labels hold for any ``--bin-ms``. Every problem is an
+:class:`~cdnf_ti.errors.InputError` naming the file and the row (1-based line number in
+the file, the header being line 1), raised before any model work starts.
 """
 from __future__ import annotations
 
 import csv
+import dataclasses
 import glob
+import math
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Iterable
 
 from ..errors import InputError
+from ..events.readers import is_event_file
 from ..frames import open_source
 
 #: Label values and the class each maps to (``near-miss`` counts as non-collision).
 LABEL_VALUES = {"collision": True, "non-collision": False, "noncollision": False, "non_collision": False,
                 "near-miss": False, "near_miss": False, "nearmiss": False}
 REQUIRED_COLUMNS = ("clip", "label", "window_start", "window_end")
+#: The window in seconds from the clip's start (instead of ``window_start``, ``window_end``, ``contact_frame``).
+SECONDS_COLUMNS = ("window_start_s", "window_end_s", "contact_s")
 #: File name endings tried, in order, when looking a clip up in the dataset folder.
 VIDEO_EXTENSIONS = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv", ".npy")
 
@@ -44,6 +52,11 @@ class ClipLabel:
         Frame of contact, when known (used for the lead time).
     row : int
         Line number of the row in the labels file (header = 1).
+    window_s : (float, float) or None
+        The window as written in seconds (``window_start_s``, ``window_end_s``), when the row gives it
+        so; ``window_start``/``window_end`` are then ``None`` until :func:`labels_in_frames` sets them.
+    contact_s : float or None
+        The contact time as written in seconds (``contact_s``).
     """
 
     clip: str
@@ -53,6 +66,13 @@ class ClipLabel:
     window_end: int | None
     contact_frame: int | None
     row: int
+    window_s: tuple[float, float] | None = None
+    contact_s: float | None = None
+
+    @property
+    def in_seconds(self) -> bool:
+        """Whether the row gives its window or contact time in seconds."""
+        return self.window_s is not None or self.contact_s is not None
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -73,6 +93,8 @@ HINTS = {
     "missing": "put the video in the dataset folder or fix the clip name",
     "outside": "frames are 0-based: the last frame of an N-frame video is N-1",
     "ambiguous": "write the file name with its extension in the clip column",
+    "seconds": "times are seconds from the clip's start, numbers >= 0",
+    "both": "give the window and contact in frames or in seconds, not both",
 }
 
 
@@ -94,6 +116,19 @@ def _int_field(path: str, line: int, name: str, text: str, clip: str = "") -> in
     if val < 0:
         raise _bad(line, clip, f"{name} {text!r} is negative", "frame")
     return int(val)
+
+
+def _seconds_field(line: int, name: str, text: str, clip: str) -> float | None:
+    text = text.strip()
+    if text == "":
+        return None
+    try:
+        val = float(text)
+    except ValueError:
+        raise _bad(line, clip, f"{name} {text!r} is not a time in seconds", "seconds") from None
+    if not math.isfinite(val) or val < 0:
+        raise _bad(line, clip, f"{name} {text!r} is not a time >= 0 s", "seconds")
+    return val
 
 
 def _reject(path: str, problems: list[str]) -> InputError:
@@ -137,10 +172,12 @@ def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
     if not rows:
         raise InputError(path, "labels file is empty")
     header = [h.strip().lower() for h in rows[0]]
-    missing = [c for c in REQUIRED_COLUMNS if c not in header]
+    seconds = all(c in header for c in SECONDS_COLUMNS[:2])
+    missing = [c for c in REQUIRED_COLUMNS if c not in header and not (seconds and c.startswith("window_"))]
     if missing:
         raise InputError(path, f"header lacks column(s) {', '.join(missing)} "
-                               f"(need {','.join(REQUIRED_COLUMNS)}[,contact_frame])")
+                               f"(need {','.join(REQUIRED_COLUMNS)}[,contact_frame], or the window in seconds: "
+                               f"{','.join(SECONDS_COLUMNS[:2])}[,contact_s])")
     col = {name: header.index(name) for name in header if name}
     labels: list[ClipLabel] = []
     seen: dict[str, int] = {}
@@ -169,20 +206,35 @@ def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
                     vals[name] = _int_field(path, line, name, get(name), clip)
                 except _RowError as e:
                     errs.append(str(e))
+            for name in SECONDS_COLUMNS:
+                try:
+                    vals[name] = _seconds_field(line, name, get(name), clip)
+                except _RowError as e:
+                    errs.append(str(e))
             if errs:
                 raise _RowError("; ".join(errs))
             ws, we, cf = vals["window_start"], vals["window_end"], vals["contact_frame"]
-            if collision:
+            ss, se, cs = vals["window_start_s"], vals["window_end_s"], vals["contact_s"]
+            in_s = ss is not None or se is not None or cs is not None
+            if in_s and (ws is not None or we is not None or cf is not None):
+                raise _bad(line, clip, "the row gives both frames and seconds", "both")
+            if collision and in_s:
+                if ss is None or se is None:
+                    raise _bad(line, clip, "a collision clip needs window_start_s and window_end_s", "window")
+                if ss > se:
+                    raise _bad(line, clip, f"window_start_s {ss:g} > window_end_s {se:g}", "window")
+            elif collision:
                 if ws is None or we is None:
                     raise _bad(line, clip, "a collision clip needs window_start and window_end", "window")
                 if ws > we:
                     raise _bad(line, clip, f"window_start {ws} > window_end {we}", "window")
-            elif ws is not None or we is not None:
+            elif ws is not None or we is not None or ss is not None or se is not None:
                 raise _bad(line, clip, f"a {lab} clip must have an empty window", "empty-window")
         except _RowError as e:
             problems.append(str(e))
             continue
-        labels.append(ClipLabel(clip, lab, collision, ws, we, cf, line))
+        labels.append(ClipLabel(clip, lab, collision, ws, we, cf, line,
+                                window_s=(ss, se) if ss is not None and se is not None else None, contact_s=cs))
     if problems:
         raise _reject(path, problems)
     if not labels:
@@ -275,27 +327,102 @@ def validate_dataset(labels: Iterable[ClipLabel], folder: str | os.PathLike,
                                                         f"{', '.join(p.name for p in same_stem)}", "ambiguous")))
             continue
         files[lab.clip] = f
-        n = frame_count(f)
-        if n is None:
-            continue
-        for name, val in (("window_start", lab.window_start), ("window_end", lab.window_end),
-                          ("contact_frame", lab.contact_frame)):
-            if val is not None and val >= n:
-                problems.append(str(_bad(lab.row, lab.clip, f"{name} {val} is outside the video "
-                                                            f"(frames 0..{n - 1})", "outside")))
+        if lab.window_start is not None or lab.contact_frame is not None:
+            problems += _outside(lab, frame_count(f))
     if problems:
         raise _reject(lp, problems)
     return files
 
 
+def _outside(lab: ClipLabel, n: int | None) -> list[str]:
+    """The problems of a label whose window or contact frame lies past the clip's last frame ``n - 1``."""
+    if n is None:
+        return []
+    unit = " (from seconds)" if lab.in_seconds else ""
+    return [str(_bad(lab.row, lab.clip, f"{name}{unit} {val} is outside the video (frames 0..{n - 1})", "outside"))
+            for name, val in (("window_start", lab.window_start), ("window_end", lab.window_end),
+                              ("contact_frame", lab.contact_frame)) if val is not None and val >= n]
+
+
+#: Tolerance (frames) of a time that falls on a frame boundary.
+_BOUNDARY = 1e-6
+
+
+def frame_at(seconds: float, fps: float) -> int:
+    """The frame (from 0) that holds time ``seconds``: frame ``k`` spans ``[k / fps, (k + 1) / fps)``."""
+    return int(math.floor(seconds * fps + _BOUNDARY))
+
+
+def last_frame_before(seconds: float, fps: float) -> int:
+    """The last frame that starts before ``seconds`` (an inclusive window's end at ``seconds``)."""
+    return int(math.ceil(seconds * fps - _BOUNDARY)) - 1
+
+
+def labels_in_frames(labels: Iterable[ClipLabel], files: dict[str, Path], fps: float | None = None,
+                     bin_ms: float | None = None, labels_path: str | os.PathLike = "labels") -> list[ClipLabel]:
+    """The labels with every window given in seconds turned into frames at its clip's rate.
+
+    A window ``[s, e]`` s covers the frames that start at or before ``e`` and end after ``s``:
+    ``floor(s fps)`` to ``ceil(e fps) - 1`` (at least the first); the contact frame is the frame
+    holding the contact time.
+
+    Parameters
+    ----------
+    labels : iterable of ClipLabel
+    files : dict
+        Clip -> its file (:func:`validate_dataset`).
+    fps : float, optional
+        ``--fps``: the rate of every video (default: each video's own; 30 for image folders and
+        ``.npy`` arrays).
+    bin_ms : float, optional
+        ``--bin-ms``: an event recording's rate is ``1000 / bin_ms`` bins per second (default 1000/30).
+    labels_path : path-like
+        The labels file, for messages.
+
+    Raises
+    ------
+    InputError
+        A window or contact time past a video's end.
+    """
+    out, problems = [], []
+    for lab in labels:
+        f = files.get(lab.clip)
+        if not lab.in_seconds or f is None:
+            out.append(lab)
+            continue
+        if is_event_file(f):
+            rate, n = 1000.0 / (bin_ms or 1000.0 / 30.0), None
+        else:
+            try:
+                src = open_source(f, fps=fps)
+                rate, n = src.fps, src.n_frames
+            except InputError:  # a bad clip: its error row when the run reaches it
+                rate, n = fps or 30.0, None
+        ws = we = None
+        if lab.window_s is not None:
+            ws = frame_at(lab.window_s[0], rate)
+            we = max(ws, last_frame_before(lab.window_s[1], rate))
+        cf = None if lab.contact_s is None else frame_at(lab.contact_s, rate)
+        lab = dataclasses.replace(lab, window_start=ws, window_end=we, contact_frame=cf)
+        problems += _outside(lab, n)
+        out.append(lab)
+    if problems:
+        raise _reject(str(labels_path), problems)
+    return out
+
+
+def is_clip_file(path: Path) -> bool:
+    """Whether ``path`` is a clip a dataset runs: a video file, an ``.npy`` array, or an event recording."""
+    return path.is_file() and (path.suffix.lower() in VIDEO_EXTENSIONS or is_event_file(path))
+
+
 def _videos_named(folder: Path, clip: str) -> list[Path]:
-    """The video files (and ``.npy`` arrays) in ``folder`` whose name is ``clip`` plus an extension."""
-    return sorted(p for p in folder.glob(f"{glob_escape(clip)}.*")
-                  if p.is_file() and p.stem == clip and p.suffix.lower() in VIDEO_EXTENSIONS)
+    """The clip files (:func:`is_clip_file`) in ``folder`` whose name is ``clip`` plus an extension."""
+    return sorted(p for p in folder.glob(f"{glob_escape(clip)}.*") if p.stem == clip and is_clip_file(p))
 
 
 def unlabelled_videos(folder: str | os.PathLike, labels: Iterable[ClipLabel]) -> list[str]:
-    """File names of the videos (and ``.npy`` arrays) in ``folder`` that no labels row names.
+    """File names of the videos, ``.npy`` arrays and event recordings in ``folder`` that no labels row names.
 
     Such videos are not run; the command line prints a note listing them.
     """
@@ -309,5 +436,4 @@ def unlabelled_videos(folder: str | os.PathLike, labels: Iterable[ClipLabel]) ->
         entries = sorted(folder.iterdir())
     except OSError:
         return []
-    return [p.name for p in entries
-            if p.is_file() and p.suffix.lower() in VIDEO_EXTENSIONS and p.name not in named]
+    return [p.name for p in entries if p.name not in named and is_clip_file(p)]

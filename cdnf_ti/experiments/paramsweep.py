@@ -46,13 +46,15 @@ from .clip_tasks import (
     ParamSweepRun as ParamSweepRun,  # re-exported: paramsweep.py was their home
     SweepTask as SweepTask,
     describe_sweep_task as describe_task,
+    frames_only_conditions,
+    note_inferred_sensor_size,
     run_sweep,
     run_sweep_task as run_sweep_task,
     setting_folder as setting_folder,
     task_fingerprint as task_fingerprint,
 )
 from .clipscores import choose_level, correctness_matrix, cross_validated_accuracy, roc
-from .labels import drop_missing, read_labels, validate_dataset
+from .labels import drop_missing, labels_in_frames, read_labels, validate_dataset
 from .layout import RAIN_CHOICES, trace_path
 from .nested import sweep_nested_cv
 from .scoring import Padding, score_clip
@@ -175,7 +177,7 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
                     folds: int = 0, workers: int | None = None, scheduler: Any = None, backend: str = "taichi",
                     arch: str = "cpu", progress: bool = True, figures: bool = True, downscale: float = 1.0,
                     html: bool = True, fps: float | None = None, color_order: str = "bgr",
-                    skip_missing: bool = False) -> ParamSweepRun:
+                    skip_missing: bool = False, events: dict | None = None) -> ParamSweepRun:
     """Run the grid over every labelled clip and write the sweep reports.
 
     Parameters
@@ -201,6 +203,9 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
         How clips are read (``--fps``, ``--color-order``).
     skip_missing : bool
         Leave out labelled clips whose video is missing (a note lists them); by default an error.
+    events : dict, optional
+        How the clips that are event recordings are binned: ``sensor_size``, ``bin_ms``,
+        ``event_threshold`` (as :func:`cdnf_ti.experiments.dataset.run_dataset`).
 
     Raises
     ------
@@ -224,7 +229,9 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
     if skip_missing:
         labels, _ = drop_missing(labels, folder)
     files = validate_dataset(labels, folder, labels_path)
-    conditions = list(RAIN_CHOICES[rain])
+    labels = labels_in_frames(labels, files, fps, (events or {}).get("bin_ms"), labels_path)
+    conditions = frames_only_conditions(files, RAIN_CHOICES[rain], folder)
+    note_inferred_sensor_size(files, (events or {}).get("sensor_size"))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_json(out / "grid.json", {"model": name, "params": {a.name: list(a.values) for a in axes},
@@ -232,7 +239,7 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
                                           "downscale": downscale, "dataset": str(folder),
                                           "labels": str(labels_path)})
     tasks = [SweepTask(lab.clip, str(Path(files[lab.clip]).resolve()), name, tuple(s.items()), setting_key(s),
-                       cond, str(out), seed, backend, arch, float(downscale), fps, color_order)
+                       cond, str(out), seed, backend, arch, float(downscale), fps, color_order, **(events or {}))
              for s in settings for cond in conditions for lab in labels]
     done = run_sweep(tasks, workers=workers, scheduler=scheduler, arch=arch,
                      progress=f"sweep {name}" if progress else False)
