@@ -110,37 +110,50 @@ MAX_STEPS = 32  # updates per launch of the solve kernels (steps_per_launch <= 3
 
 RECORD_COEFS = 2  # columns 0, 1 of a launch record: lam, mom
 
+#: The photoreceptor planes of a stacked state array (:func:`photoreceptors`): ``L`` (the last frame's
+#: grey levels) and ``P`` (the luminance change).
+L_PLANE, P_PLANE = 0, 1
+
 
 class LaunchRecord:
     """The ``(lam, mom)`` in and the residuals out of one solve launch, as one float32 array.
 
-    Row ``j`` of :attr:`array` (shape ``(MAX_STEPS, 2 + fields)``) holds update ``j``'s
+    Row ``j`` of :attr:`array` (shape ``(MAX_STEPS, 2 + fields + values)``) holds update ``j``'s
     ``(lam, mom)`` in columns 0-1 and, after the launch, its residual ``max |F(u) - u|``
-    per field in columns 2.. (-1: the update did not run).
+    per field in columns 2.. (-1: the update did not run). Row 0's last ``values`` columns
+    (from :attr:`values_at`) hold the launch's own values (buffer parities, flags: small
+    integers and float32 values that change at every launch), set by :meth:`start`.
 
     Parameters
     ----------
     fields : int
         Fields updated together (2: ON and OFF; 1: Summation).
+    values : int
+        The launch's values after the residual columns (0: none).
     """
 
-    def __init__(self, fields: int):
+    def __init__(self, fields: int, values: int = 0):
         self.fields = fields
-        self.array = np.zeros((MAX_STEPS, RECORD_COEFS + fields), np.float32)
+        self.values_at = RECORD_COEFS + fields
+        self.array = np.zeros((MAX_STEPS, RECORD_COEFS + fields + values), np.float32)
 
-    def start(self, coefs: Sequence[tuple[float, float]]) -> np.ndarray:
-        """Fill in the coefficients of a launch of ``len(coefs)`` updates; returns :attr:`array`."""
+    def start(self, coefs: Sequence[tuple[float, float]], values: Sequence[float] = ()) -> np.ndarray:
+        """Fill in the coefficients of a launch of ``len(coefs)`` updates and its ``values``; returns
+        :attr:`array`."""
         if not 1 <= len(coefs) <= MAX_STEPS:
             raise ValueError(f"1..{MAX_STEPS} updates per launch, got {len(coefs)}")
         a = self.array
+        if len(values) != a.shape[1] - self.values_at:
+            raise ValueError(f"{a.shape[1] - self.values_at} launch values, got {len(values)}")
         a[: len(coefs), :RECORD_COEFS] = np.asarray(coefs, np.float32).reshape(-1, RECORD_COEFS)
-        a[:, RECORD_COEFS:] = -1.0
+        a[:, RECORD_COEFS:self.values_at] = -1.0
+        a[0, self.values_at:] = values
         return a
 
     def residuals(self, count: int) -> list[tuple[float, ...]]:
         """The residuals of the updates the launch ran, of the first ``count`` (per update, per field)."""
         out = []
-        for row in self.array[:count, RECORD_COEFS:]:
+        for row in self.array[:count, RECORD_COEFS:self.values_at]:
             if row.min() < 0.0:
                 break
             out.append(tuple(float(r) for r in row))
@@ -156,10 +169,20 @@ def layout(width: int, lanes: int) -> tuple[int, int]:
     return e1, e1 + 2
 
 
-def context(name: str, fields: str):
+def context(name: str, fields: str, grid: str | None = None):
     """A named tuple type for a kernel's context: its arguments, read by name in the stages
-    (``ctx.u_on``), never by position. Build one in a kernel as ``ti.static(Ctx(...))``."""
-    return collections.namedtuple(name, fields)
+    (``ctx.u_on``), never by position. Build one in a kernel as ``ti.static(Ctx(...))``.
+
+    ``grid`` names the member whose last two dimensions are the frame's ``(H, W)`` (an array of
+    shape (H, W) or (planes, H, W)): the context's ``grid`` property, which :func:`frame_runs`
+    reads (a property, not a member: it passes nothing more to a function).
+    """
+    base = collections.namedtuple(name, fields)
+    if grid is None:
+        return base
+    if grid not in base._fields:
+        raise ValueError(f"{name}: grid {grid!r} is not one of its members {base._fields}")
+    return type(name, (base,), {"__slots__": (), "grid": property(lambda self: getattr(self, grid))})
 
 
 def namespace(module_globals: dict, local_vars: dict) -> SimpleNamespace:
@@ -188,6 +211,10 @@ def build(ti, lanes: int) -> SimpleNamespace:
     any_lane, lane_abs, run_max = X.any_lane, X.lane_abs, X.run_max
 
     F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
+    #: A stacked state array of the generic kernels: planes of one frame size, (planes, H, W) float32.
+    F3 = ti.types.ndarray(dtype=ti.f32, ndim=3)
+    #: A backend's coefficients: one small float32 array, set once per backend (each model names its slots).
+    COEFS = ti.types.ndarray(dtype=ti.f32, ndim=1)
 
 
     @ti.func
@@ -209,11 +236,12 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
 
     @ti.func
-    def start_coefficients(start: ti.template(), r):
-        """Row ``r`` of a local-start array (float32 ndarray, shape (2, 7), from
-        :func:`cdnf_ti.solver.cdnf_local_starts`) as a vector, read once per row of work."""
-        return ti.Vector([start[r, 0], start[r, 1], start[r, 2], start[r, 3], start[r, 4], start[r, 5],
-                          start[r, 6]], dt=ti.f32)
+    def start_coefficients(coef: ti.template(), at):
+        """The 7 local-start coefficients ``coef[at:at + 7]`` (a row of
+        :func:`cdnf_ti.solver.cdnf_local_starts`, in a backend's coefficient array) as a vector,
+        read once per row of work."""
+        return ti.Vector([coef[at], coef[at + 1], coef[at + 2], coef[at + 3], coef[at + 4], coef[at + 5],
+                          coef[at + 6]], dt=ti.f32)
 
 
     @ti.func
@@ -274,6 +302,33 @@ def build(ti, lanes: int) -> SimpleNamespace:
         """``x[i, j .. j + n - 1] = v``."""
         for c in ti.static(range(n)):
             x[i, j + c] = v[c]
+
+
+    @ti.func
+    def plane_load(x: ti.template(), k, i, j, n: ti.template()):
+        """``x[k, i, j .. j + n - 1]`` (plane ``k`` of a stacked array) as a float32 vector of n values."""
+        v = ti.Vector([0.0] * n, dt=ti.f32)
+        for c in ti.static(range(n)):
+            v[c] = x[k, i, j + c]
+        return v
+
+
+    @ti.func
+    def plane_store(x: ti.template(), k, i, j, v, n: ti.template()):
+        """``x[k, i, j .. j + n - 1] = v``."""
+        for c in ti.static(range(n)):
+            x[k, i, j + c] = v[c]
+
+
+    @ti.func
+    def photoreceptors(frame: ti.template(), x: ti.template(), i, j, n: ti.template(), scale, keep):
+        """:func:`luminance_change` on a stacked state array ``x``: ``L`` and ``P`` are its planes
+        :data:`L_PLANE` and :data:`P_PLANE`. Returns ``P`` of the run."""
+        g = run_load(frame, i, j, n) * scale
+        p = keep * (g - plane_load(x, L_PLANE, i, j, n))
+        plane_store(x, L_PLANE, i, j, g, n)
+        plane_store(x, P_PLANE, i, j, p, n)
+        return p
 
 
     @ti.func
@@ -342,64 +397,107 @@ def build(ti, lanes: int) -> SimpleNamespace:
         return acc
 
 
-    DogRowRunCtx = context("DogRowRunCtx", "v row1 row2 g1 g2 mode R")
+    @ti.func
+    def frame_runs(body: ti.template(), ctx: ti.template(), k, blocks, reduce: ti.template(), halo: ti.template()):
+        """Work item ``k`` (a row's column block, :func:`block_span`) of a kernel's parallel loop over the
+        frame of ``ctx.grid`` (:func:`context`): call ``body(ctx, i, j, n)`` on its columns in runs.
+
+        Runs of ``n = CHUNK`` (then ``QUARTER``) columns ``j .. j + n - 1`` keep ``halo`` columns either
+        side inside the frame (``halo`` >= 1: the body's horizontal reach); every other column is a
+        run of one (a body that reads neighbours maps them into the frame, :func:`run_neighbours`).
+        Returns the ``reduce`` (``"sum"``: float64 sum, in column order; ``"max"``) of body's returns.
+        """
+        g = ti.static(ctx.grid)
+        W = g.shape[ti.static(len(g.shape) - 1)]
+        i, j0, j1 = block_span(k, W, blocks)
+        acc = ti.f64(0.0)
+        j = j0
+        stop = ti.min(j1, halo)
+        while j < stop:
+            acc = _combine(acc, body(ctx, i, j, 1), reduce)
+            j += 1
+        end = ti.min(j1, W - halo)
+        for n in ti.static((CHUNK, QUARTER)):
+            while j + n <= end:
+                acc = _combine(acc, body(ctx, i, j, n), reduce)
+                j += n
+        while j < j1:
+            acc = _combine(acc, body(ctx, i, j, 1), reduce)
+            j += 1
+        return acc
+
 
     @ti.func
-    def _dog_row_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
-        v, row1, row2, g1, g2 = ti.static(ctx.v, ctx.row1, ctx.row2, ctx.g1, ctx.g2)
-        mode, R = ti.static(ctx.mode, ctx.R)
-        W = v.shape[1]
+    def run_neighbours(i, j, H, W):
+        """``(im, ip, jm, jp)`` of the run at ``(i, j)`` of a :func:`frame_runs` body: the rows above and below
+        and the first columns of the left and right neighbour runs, mapped into the frame (replicate border)."""
+        return ti.min(ti.max(i - 1, 0), H - 1), ti.min(ti.max(i + 1, 0), H - 1), ti.max(j - 1, 0), ti.min(j + 1, W - 1)
+
+
+    # -- separable DoG: the taps ``g1``, ``g2`` (2 R + 1 each) are in a coefficient array from slot
+    # ``at`` (``g1`` first); the row passes are two planes of a stacked array --
+
+    DogRowRunCtx = context("DogRowRunCtx", "v x rows coef at mode R", grid="v")
+
+    @ti.func
+    def _dog_row_run(ctx: ti.template(), i, j, n: ti.template()):
+        src, x, coef = ti.static(ctx.v, ctx.x, ctx.coef)
+        rows = ctx.rows
+        at, mode, R = ti.static(ctx.at, ctx.mode, ctx.R)
+        W = src.shape[1]
         a1 = ti.Vector([0.0] * n, dt=ti.f32)
         a2 = ti.Vector([0.0] * n, dt=ti.f32)
         for d in ti.static(range(-R, R + 1)):
-            x = ti.Vector([0.0] * n, dt=ti.f32)
+            v = ti.Vector([0.0] * n, dt=ti.f32)
             if ti.static(n == 1):  # a column near the border: map the tap into the frame
-                x[0] = border_weight(j + d, W, mode) * v[i, border_index(j + d, W, mode)]
+                v[0] = border_weight(j + d, W, mode) * src[i, border_index(j + d, W, mode)]
             else:  # a run with every tap inside the frame
-                x = run_load(v, i, j + d, n)
-            a1 += g1[d + R] * x
-            a2 += g2[d + R] * x
-        run_store(row1, i, j, a1, n)
-        run_store(row2, i, j, a2, n)
+                v = run_load(src, i, j + d, n)
+            a1 += coef[at + d + R] * v
+            a2 += coef[at + 2 * R + 1 + d + R] * v
+        plane_store(x, rows, i, j, a1, n)
+        plane_store(x, rows + 1, i, j, a2, n)
         return 0.0
 
 
     @ti.func
-    def dog_row_pass(v: ti.template(), row1: ti.template(), row2: ti.template(), g1: ti.template(),
-                     g2: ti.template(), blocks, mode: ti.template(), R: ti.template()):
-        """Horizontal passes of a separable DoG: ``row1 = g1 (*)_x v``, ``row2 = g2 (*)_x v``.
+    def dog_row_pass(v: ti.template(), x: ti.template(), rows, coef: ti.template(), at: ti.template(), blocks,
+                     mode: ti.template(), R: ti.template()):
+        """Horizontal passes of a separable DoG of ``v`` (H, W) into planes of ``x``: plane ``rows`` =
+        ``g1 (*)_x v``, plane ``rows + 1`` = ``g2 (*)_x v``.
 
-        ``g1``/``g2`` are 1-D profiles of length ``2R + 1`` (``R`` a compile-time radius:
-        the taps unroll). Called at a kernel's top level, the loop is the kernel's
-        parallel loop over (row, column-block) items.
+        ``g1``/``g2`` are 1-D profiles of length ``2R + 1`` at ``coef[at:]`` (``R`` a compile-time
+        radius: the taps unroll). Called at a kernel's top level, the loop is the kernel's
+        parallel loop over (row, column-block) items. ``v`` is an array of its own, not a plane
+        of a stacked one: read through a runtime plane index, the border columns' taps compiled
+        to other roundings (the traces were no longer bit-identical).
         """
         for k in range(v.shape[0] * blocks):
-            dog_row_item(v, row1, row2, g1, g2, k, blocks, mode, R)
+            dog_row_item(v, x, rows, coef, at, k, blocks, mode, R)
 
 
     @ti.func
-    def dog_row_item(v: ti.template(), row1: ti.template(), row2: ti.template(), g1: ti.template(),
-                     g2: ti.template(), k, blocks, mode: ti.template(), R: ti.template()):
+    def dog_row_item(v: ti.template(), x: ti.template(), rows, coef: ti.template(), at: ti.template(), k, blocks,
+                     mode: ti.template(), R: ti.template()):
         """Work item ``k`` (a row's column block, :func:`block_span`) of :func:`dog_row_pass`."""
-        H, W = v.shape[0], v.shape[1]
-        i, j0, j1 = block_span(k, W, blocks)
-        ctx = ti.static(DogRowRunCtx(v, row1, row2, g1, g2, mode, R))
-        row_runs(_dog_row_run, ctx, i, j0, j1, H, W, "sum", ti.static(max(R, 1)))
+        ctx = ti.static(DogRowRunCtx(v, x, rows, coef, at, mode, R))
+        frame_runs(_dog_row_run, ctx, k, blocks, "sum", ti.static(max(R, 1)))
 
 
     @ti.func
-    def dog_column_run(row1: ti.template(), row2: ti.template(), g1: ti.template(), g2: ti.template(),
-                       A, B, i, j, n: ti.template(), mode: ti.template(), R: ti.template()):
+    def dog_column_run(x: ti.template(), rows, coef: ti.template(), at: ti.template(), A, B, i, j,
+                       n: ti.template(), mode: ti.template(), R: ti.template()):
         """Vertical pass on the run ``(i, j .. j + n - 1)``: ``A g1 (*)_y row1 - B g2 (*)_y row2`` = ``W_s (*) v``
-        (radius ``R``, unrolled; rows mapped by the border mode)."""
-        H = row1.shape[0]
+        (``row1``, ``row2``: planes ``rows``, ``rows + 1`` of ``x`` from :func:`dog_row_pass`; radius ``R``,
+        unrolled; rows mapped by the border mode)."""
+        H = x.shape[1]
         b1 = ti.Vector([0.0] * n, dt=ti.f32)
         b2 = ti.Vector([0.0] * n, dt=ti.f32)
         for d in ti.static(range(-R, R + 1)):
             ii = border_index(i + d, H, mode)
             wgt = border_weight(i + d, H, mode)
-            b1 += (g1[d + R] * wgt) * run_load(row1, ii, j, n)
-            b2 += (g2[d + R] * wgt) * run_load(row2, ii, j, n)
+            b1 += (coef[at + d + R] * wgt) * plane_load(x, rows, ii, j, n)
+            b2 += (coef[at + 2 * R + 1 + d + R] * wgt) * plane_load(x, rows + 1, ii, j, n)
         return A * b1 - B * b2
 
 
@@ -408,6 +506,20 @@ def build(ti, lanes: int) -> SimpleNamespace:
         """Set every element of ``x`` to ``value``."""
         for i, j in x:
             x[i, j] = value
+
+
+    @ti.kernel
+    def fill_planes(x: F3, k0: ti.i32, k1: ti.i32, value: ti.f32):
+        """Set every element of planes ``k0 .. k1 - 1`` of ``x`` to ``value``."""
+        for k, i, j in ti.ndrange((k0, k1), x.shape[1], x.shape[2]):
+            x[k, i, j] = value
+
+
+    @ti.kernel
+    def copy_plane(x: F3, src: ti.i32, dst: ti.i32):
+        """Plane ``dst`` of ``x`` = plane ``src``."""
+        for i, j in ti.ndrange(x.shape[1], x.shape[2]):
+            x[dst, i, j] = x[src, i, j]
 
 
 

@@ -13,8 +13,25 @@ before the launch (see :mod:`cdnf_ti.kernels.lgmd`). NumPy float64 oracle:
 import functools
 from types import SimpleNamespace
 
+from ..taichi_runtime import scalar_kernel
 from . import common
 from .common import REPLICATE, context, namespace  # noqa: F401 - part of this module's interface
+
+# -- the state: a stacked float32 array (PLANES, H, W) per backend; the DoG's row passes, (2, H, W);
+# the firing rates f(u) of the last two frames, two (H, W) arrays (the DoG's input, dog_row_pass).
+# The row passes are an array of their own: read from the array that the update writes (u), the
+# column pass compiled to other roundings (the traces were no longer bit-identical).
+L_, P_ = common.L_PLANE, common.P_PLANE  # photoreceptors (the last frame), luminance change P
+E_ = 2  # the binary input E
+U_ = 3  # the field u
+PLANES = 4
+
+# -- a backend's coefficients: one float32 array, set once (cdnf_ti.backends.sdnf) --
+DOG_A, H_REST, THETA, T_B = 0, 1, 2, 3  # A; h; theta's scale 1 / tanh(1); the binary threshold T_b
+TAPS = 4  # the DoG profiles g1, g2 (2 R + 1 each)
+#: The update's coefficients in a work item's local vector (read once per work item, not once per run:
+#: read where the runs use them, they compiled to other roundings).
+RUN_A, RUN_H, RUN_THETA = 0, 1, 2
 
 
 @functools.lru_cache(maxsize=None)
@@ -23,45 +40,44 @@ def build(ti, lanes: int) -> SimpleNamespace:
     lanes per vector element of the fast path: a namespace of every name below (and the
     module-level constants). Built once per (compiler, lanes), after the runtime started."""
     C = common.build(ti, lanes)
-    block_span = C.block_span
+    COEFS = C.COEFS
+    F3 = C.F3
+    F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
     dog_column_run = C.dog_column_run
     dog_row_pass = C.dog_row_pass
     fill = C.fill
-    luminance_change = C.luminance_change
-    row_runs = C.row_runs
-    run_load = C.run_load
+    fill_planes = C.fill_planes
+    frame_runs = C.frame_runs
+    photoreceptors = C.photoreceptors
+    plane_load = C.plane_load
+    plane_store = C.plane_store
     run_store = C.run_store
     run_sum = C.run_sum
     tanh_rational = C.tanh_rational
 
-    F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
-    F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
     D1 = ti.types.ndarray(dtype=ti.f64, ndim=1)  # a launch's results ``out``, set by the caller before it
 
 
-    LoadRunCtx = context("LoadRunCtx", "frame L P E scale keep t_b")
+    LoadRunCtx = context("LoadRunCtx", "frame x coef scale keep", grid="x")
 
     @ti.func
-    def _load_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
-        frame, L, P, E = ti.static(ctx.frame, ctx.L, ctx.P, ctx.E)
-        scale, keep, t_b = ctx.scale, ctx.keep, ctx.t_b
-        p = luminance_change(frame, L, P, i, j, n, scale, keep, False)
-        e = ti.select(ti.abs(p) >= t_b, 1.0, 0.0)
-        run_store(E, i, j, e, n)
+    def _load_run(ctx: ti.template(), i, j, n: ti.template()):
+        x = ti.static(ctx.x)
+        p = photoreceptors(ctx.frame, x, i, j, n, ctx.scale, ctx.keep)
+        e = ti.select(ti.abs(p) >= ctx.coef[T_B], 1.0, 0.0)
+        plane_store(x, E_, i, j, e, n)
         return run_sum(e, n)
 
 
     @ti.kernel
-    def load_binary(frame: ti.types.ndarray(ndim=2), L: F2, P: F2, E: F2, scale: ti.f32, first: ti.i32,
-                    t_b: ti.f32, blocks: ti.i32, out: D1):
-        """``g = frame * scale`` in [0, 1]; ``P = g - L`` (0 when ``first``); ``E = [|P| >= t_b]``;
+    def load_binary(frame: ti.types.ndarray(ndim=2), x: F3, coef: COEFS, scale: ti.f32, first: ti.i32,
+                    blocks: ti.i32, out: D1):
+        """``g = frame * scale`` in [0, 1]; ``P = g - L`` (0 when ``first``); ``E = [|P| >= T_b]``;
         adds ``sum E`` to ``out[0]`` (set to 0 by the caller)."""
-        H, W = L.shape[0], L.shape[1]
         keep = ti.select(first != 0, 0.0, 1.0)
-        for k in range(H * blocks):
-            i, j0, j1 = block_span(k, W, blocks)
-            ctx = ti.static(LoadRunCtx(frame, L, P, E, scale, keep, t_b))
-            ti.atomic_add(out[0], row_runs(_load_run, ctx, i, j0, j1, H, W, "sum", 1))
+        for k in range(x.shape[1] * blocks):
+            ctx = ti.static(LoadRunCtx(frame, x, coef, scale, keep))
+            ti.atomic_add(out[0], frame_runs(_load_run, ctx, k, blocks, "sum", 1))
 
 
     @ti.func
@@ -70,37 +86,39 @@ def build(ti, lanes: int) -> SimpleNamespace:
         return tanh_rational(ti.max(u, 0.0)) * theta_scale
 
 
-    UpdateRunCtx = context("UpdateRunCtx", "E row1 row2 u_new F_new g1 g2 A B_t h theta_scale R")
+    UpdateRunCtx = context("UpdateRunCtx", "x rows F_new coef B_t run", grid="x")
 
-    @ti.func
-    def _update_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
-        E, row1, row2, u_new, F_new, g1, g2 = ti.static(ctx.E, ctx.row1, ctx.row2, ctx.u_new, ctx.F_new, ctx.g1, ctx.g2)
-        A, B_t, h, theta_scale = ctx.A, ctx.B_t, ctx.h, ctx.theta_scale
-        R = ti.static(ctx.R)
-        lateral = dog_column_run(row1, row2, g1, g2, A, B_t, i, j, n, REPLICATE, R)
-        v = run_load(E, i, j, n) - h + tanh_rational(0.5 * lateral)
-        run_store(u_new, i, j, v, n)
-        f = _act(v, theta_scale)
-        run_store(F_new, i, j, f, n)
-        return run_sum(f, n)
+    @functools.lru_cache(maxsize=None)
+    def field_update_kernel(R: int):
+        """The field update for a DoG of radius ``R`` (a compile-time choice: the taps unroll;
+        one kernel per radius, compiled once)."""
 
+        @ti.func
+        def _update_run(ctx: ti.template(), i, j, n: ti.template()):
+            x, F_new = ti.static(ctx.x, ctx.F_new)
+            lateral = dog_column_run(ctx.rows, 0, ctx.coef, TAPS, ctx.run[RUN_A], ctx.B_t, i, j, n, REPLICATE, R)
+            v = plane_load(x, E_, i, j, n) - ctx.run[RUN_H] + tanh_rational(0.5 * lateral)
+            plane_store(x, U_, i, j, v, n)
+            f = _act(v, ctx.run[RUN_THETA])
+            run_store(F_new, i, j, f, n)
+            return run_sum(f, n)
 
-    @ti.kernel
-    def field_update(
-        E: F2, F: F2, row1: F2, row2: F2, u_new: F2, F_new: F2, g1: F1, g2: F1,
-        A: ti.f32, B_t: ti.f32, h: ti.f32, theta_scale: ti.f32, blocks: ti.i32, R: ti.template(), out: D1,
-    ):
-        """``u_new = E - h + vartheta(A g1g1 (*) F - B_t g2g2 (*) F)``, ``F_new = f(u_new)``;
-        adds ``sum F_new`` to ``out[0]`` (set to 0 by the caller).
+        @ti.kernel
+        def field_update(x: F3, F: F2, F_new: F2, rows: F3, coef: COEFS, B_t: ti.f32, blocks: ti.i32, out: D1):
+            """``u = E - h + vartheta(A g1g1 (*) F - B_t g2g2 (*) F)``, ``F_new = f(u)``;
+            adds ``sum F_new`` to ``out[0]`` (set to 0 by the caller).
 
-        ``F = f(u(t-1))`` is the previous frame's firing rate (time-delayed lateral
-        interaction); ``vartheta(a) = tanh(a / 2)``; ``R``: the DoG radius (``g1``/``g2`` have ``2R + 1`` taps).
-        """
-        H, W = F.shape[0], F.shape[1]
-        dog_row_pass(F, row1, row2, g1, g2, blocks, REPLICATE, R)
-        for k in range(H * blocks):
-            i, j0, j1 = block_span(k, W, blocks)
-            ctx = ti.static(UpdateRunCtx(E, row1, row2, u_new, F_new, g1, g2, A, B_t, h, theta_scale, R))
-            ti.atomic_add(out[0], row_runs(_update_run, ctx, i, j0, j1, H, W, "sum", 1))
+            ``F = f(u(t-1))`` is the previous frame's firing rate (time-delayed lateral
+            interaction); ``vartheta(a) = tanh(a / 2)``; ``rows``: the DoG's row passes (scratch).
+            """
+            dog_row_pass(F, rows, 0, coef, TAPS, blocks, REPLICATE, R)
+            for k in range(x.shape[1] * blocks):
+                # the coefficients into a local (RUN_A, ...; an expression in the context would be
+                # evaluated where the runs use it)
+                run = ti.Vector([coef[DOG_A], coef[H_REST], coef[THETA]], dt=ti.f32)
+                ctx = ti.static(UpdateRunCtx(x, rows, F_new, coef, B_t, run))
+                ti.atomic_add(out[0], frame_runs(_update_run, ctx, k, blocks, "sum", 1))
+
+        return scalar_kernel(field_update)
 
     return namespace(globals(), locals())

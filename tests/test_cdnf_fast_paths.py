@@ -147,7 +147,7 @@ def test_a_second_model_of_a_frame_size_compiles_nothing_new():
 
 def _pending_rows(model, group):
     be = model._be
-    spans = be.ws.pend[group].to_numpy()[be.c if group == "c" else be.s]
+    spans = be.ws.spans(group)[be.c if group == "c" else be.s]
     return int(np.sum(spans[:, 1] != EMPTY_HI)), spans.shape[0]
 
 
@@ -186,7 +186,7 @@ def test_restoring_rest_marks_every_element_pending():
     model.run(frames)
     model._be.restore_rest()
     for group in ("c", "s"):
-        for a in model._be.ws.pend[group].to_numpy():  # both parities
+        for a in model._be.ws.spans(group):  # both parities
             assert np.all(a[:, 0] == 1) and np.all(a[:, 1] == model._be.ws.e1)
 
 
@@ -242,10 +242,10 @@ def test_contrast_solve_that_converges_computes_the_summation_input_of_its_resul
     res = be.contrast_iterate_many([(1.0, 0.0)] * 16)
     assert max(res[-1]) <= be._tol32 and be._s_ready  # converged within the launch
     be.summation_input()  # uses what the launch computed
-    fused = be.ws.S.to_numpy()
+    fused = be.ws.planes()[be.K.S_]
     be._s_ready = False
     be.summation_input()  # the stand-alone kernel on the same fields
-    assert np.array_equal(fused, be.ws.S.to_numpy())
+    assert np.array_equal(fused, be.ws.planes()[be.K.S_])
 
 
 def test_summation_solve_that_converges_computes_the_mean_activation_of_its_result():

@@ -2,13 +2,15 @@
 
 :class:`TaichiCDNFBackend` runs the generic kernels (GPUs, narrow frames) and
 :class:`LaneTaichiCDNFBackend` the lane kernels (the fast CPU path). Both serve the
-:class:`~cdnf_ti.models.cdnf.CDNF` model through :func:`make_backend`.
+:class:`~cdnf_ti.models.cdnf.CDNF` model through :func:`make_backend`. Each keeps its state
+in one stacked array (the planes of :mod:`cdnf_ti.kernels.cdnf`) and the model's
+coefficients in one small float32 array, set when the backend is built (:class:`Coefficients`).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..kernels import common
+from ..kernels import cdnf as layout, common
 from ..kernels.common import BORDER_CODES, LaunchRecord
 from ..kernels.schedule import MAX_WORKERS
 from ..params import THETA_SCALE, CDNFParams, contrast_kernel, dog_profiles, resting_levels
@@ -17,9 +19,61 @@ from ..taichi_runtime import cpu_threads, dsl, ensure_taichi, kernels, lanes
 from .events import load_net_contrast
 from .workspace import LaneState
 
+V_END = layout.V_ + 2  # the planes past the last field
+
+
+class Coefficients:
+    """A C-DNF backend's coefficients: one float32 ``ti.ndarray`` (slots of :mod:`cdnf_ti.kernels.cdnf`),
+    filled when the backend is built and again only when one of them changes (:meth:`set`).
+
+    Parameters
+    ----------
+    params : CDNFParams
+    tau : float
+        The freezing threshold of the lane solves.
+    workers : int
+        The persistent workers of a lane solve launch.
+    """
+
+    def __init__(self, params: CDNFParams, tau: float = 0.0, workers: int = 1):
+        k = np.exp(-np.arange(-1, 2) ** 2 / (2.0 * params.sigma_c**2))
+        k /= k.sum()  # W_c = k k^T with k the normalised 3-tap Gaussian (contrast_kernel is its outer product)
+        wc = contrast_kernel(params.sigma_c)
+        g1, g2 = dog_profiles(params)
+        values = np.zeros(layout.TAPS + g1.size + g2.size, np.float64)
+        values[[layout.K0, layout.K1]] = float(k[1]), float(k[0])
+        values[[layout.WC0, layout.WC1, layout.WC2]] = float(wc[1, 1]), float(wc[0, 1]), float(wc[0, 0])
+        values[layout.H_REST] = params.h
+        values[layout.TAU] = tau
+        values[layout.TOL] = params.tol
+        values[layout.GROW] = RESTART_GROWTH
+        values[[layout.ALPHA_ON, layout.ALPHA_OFF, layout.THETA]] = params.alpha_on, params.alpha_off, THETA_SCALE
+        values[[layout.DOG_A, layout.DOG_B]] = params.A, params.B
+        values[layout.LOCAL] = int(params.start == "local")
+        values[layout.WORKERS] = workers
+        self.values = values.astype(np.float32)  # each a float32 as a kernel's f32 argument would be
+        starts = cdnf_local_starts(params).astype(np.float32)
+        self.values[layout.START_U:layout.START_U + starts.shape[1]] = starts[0]
+        self.values[layout.START_V:layout.START_V + starts.shape[1]] = starts[1]
+        self.values[layout.TAPS:] = np.concatenate([g1.astype(np.float32), g2.astype(np.float32)])
+        ti = dsl()
+        self.array = ti.ndarray(ti.f32, self.values.shape)  # on the device once, not copied per launch
+        self.array.from_numpy(self.values)
+
+    def __getitem__(self, slot: int) -> float:
+        return float(self.values[slot])
+
+    def set(self, slot: int, value: float) -> None:
+        """Change one coefficient (tests and warm-up runs: the freezing threshold, the workers, the local start)."""
+        if self.values[slot] != np.float32(value):
+            self.values[slot] = value
+            self.array.from_numpy(self.values)
+
 
 class TaichiCDNFBackend:
-    """C-DNF field state in Taichi ndarrays (float32) driven by the kernels.
+    """C-DNF field state in Taichi ndarrays (float32): one stacked array (the
+    :data:`~cdnf_ti.kernels.cdnf.PLANES` planes of the frame) and the Summation field's two buffers,
+    driven by the generic kernels.
 
     Parameters
     ----------
@@ -44,31 +98,25 @@ class TaichiCDNFBackend:
         self._records = {"c": LaunchRecord(2), "s": LaunchRecord(1)}  # contrast, Summation launches
         self.steps = self.launch_steps(arch)  # updates per launch, per group (tests may change them)
         self._total = np.zeros(1)  # the mean activation's float64 sum
-        start, self.local = _local_start_args(params)
-        self._start = ti.ndarray(ti.f32, start.shape)  # on the device once, not copied per launch
-        self._start.from_numpy(start)
-
-        def nd() -> "ti.Ndarray":
-            return ti.ndarray(ti.f32, self.shape)
-
-        self.L, self.P, self.S = nd(), nd(), nd()
-        self.u_on, self.u_off, self.v = [nd(), nd()], [nd(), nd()], [nd(), nd()]
-        self.row1, self.row2 = nd(), nd()
-        self.rest_u, self.rest_v = nd(), nd()
+        self.coef = Coefficients(params)
+        self.x = ti.ndarray(ti.f32, (K.PLANES, *self.shape))  # L, P, S, the row passes, u_on, u_off, the rest
+        self.v = [ti.ndarray(ti.f32, self.shape) for _ in range(2)]  # the Summation field's buffers
+        self.rest_v = ti.ndarray(ti.f32, self.shape)
         self.c = 0  # index of the current contrast buffers
         self.s = 0  # index of the current Summation buffer
-        wc = contrast_kernel(params.sigma_c)
-        self.wc = (float(wc[1, 1]), float(wc[0, 1]), float(wc[0, 0]))
-        g1, g2 = dog_profiles(params)
-        self.g1 = ti.ndarray(ti.f32, g1.shape)
-        self.g2 = ti.ndarray(ti.f32, g2.shape)
-        self.g1.from_numpy(g1.astype(np.float32))
-        self.g2.from_numpy(g2.astype(np.float32))
         u0, v0 = resting_levels(params)
-        for a in self.u_on + self.u_off:
-            K.fill(a, u0)
+        K.fill_planes(self.x, K.U_ON, K.U_OFF + 2, u0)
         for a in self.v:
             K.fill(a, v0)
+
+    @property
+    def local(self) -> int:
+        """1: the kernels set the fields' local start as they load a frame and compute a Summation input."""
+        return int(self.coef[layout.LOCAL])
+
+    @local.setter
+    def local(self, value: int) -> None:
+        self.coef.set(layout.LOCAL, value)
 
     @staticmethod
     def launch_steps(arch: str) -> dict[str, int]:
@@ -83,13 +131,15 @@ class TaichiCDNFBackend:
         return {"c": 8, "s": 1} if arch != "cpu" else {"c": 1, "s": 1}
 
     def save_rest(self) -> None:
-        self.K.copy(self.u_on[self.c], self.rest_u)
-        self.K.copy(self.v[self.s], self.rest_v)
+        K = self.K
+        K.copy_plane(self.x, K.U_ON + self.c, K.REST_U)
+        K.copy(self.v[self.s], self.rest_v)
 
     def restore_rest(self) -> None:
-        self.K.copy(self.rest_u, self.u_on[self.c])
-        self.K.copy(self.rest_u, self.u_off[self.c])
-        self.K.copy(self.rest_v, self.v[self.s])
+        K = self.K
+        K.copy_plane(self.x, K.REST_U, K.U_ON + self.c)
+        K.copy_plane(self.x, K.REST_U, K.U_OFF + self.c)
+        K.copy(self.rest_v, self.v[self.s])
 
     def reset(self) -> None:
         """Back to the resting state (the :class:`~cdnf_ti.models.base.ModelBackend` contract)."""
@@ -97,8 +147,7 @@ class TaichiCDNFBackend:
 
     def load(self, grey: np.ndarray, first: bool) -> None:
         scale = 1.0 / 255.0 if grey.dtype == np.uint8 else 1.0
-        self.K.load_frame(grey, self.L, self.P, scale, int(first), self.blocks, self.u_on[self.c],
-                          self.u_off[self.c], self._start, self.local)
+        self.K.load_frame(grey, self.x, self.coef.array, scale, int(first), self.c, self.blocks)
 
     def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> None:
         """Take an event bin (H, W each, contrast in [0, 1]): ``P = p_on - p_off``, the net signed
@@ -107,7 +156,7 @@ class TaichiCDNFBackend:
         return load_net_contrast(self, p_on, p_off)
 
     def clear_input(self) -> None:
-        self.K.fill(self.P, 0.0)
+        self.K.fill_planes(self.x, self.K.P_, self.K.P_ + 1, 0.0)
 
     def contrast_iterate(self, lam: float, mom: float = 0.0) -> tuple[float, float]:
         return self.contrast_iterate_many([(lam, mom)])[0]
@@ -117,12 +166,10 @@ class TaichiCDNFBackend:
         launches of :attr:`steps` ``["c"]`` (:func:`~cdnf_ti.kernels.cdnf.contrast_solve`); returns
         the residuals of the updates run."""
         def launch(rec, chunk):
-            c, n = self.c, 1 - self.c
-            self.K.contrast_solve(self.P, self.u_on[c], self.u_off[c], self.u_on[n], self.u_off[n], *self.wc,
-                                  self.params.h, rec.start(chunk), len(chunk), self._tol32, RESTART_GROWTH,
-                                  self.blocks, self.mode, self.steps["c"])
+            self.K.contrast_solve(self.x, self.coef.array, rec.start(chunk), self.c, len(chunk), self.blocks,
+                                  self.mode, self.steps["c"])
             res = rec.residuals(len(chunk))
-            self.c = (c + len(res)) % 2
+            self.c = (self.c + len(res)) % 2
             return res
 
         return self._launches("c", launch, coefs)
@@ -140,9 +187,7 @@ class TaichiCDNFBackend:
         return out
 
     def summation_input(self) -> None:
-        p = self.params
-        self.K.summation_input(self.u_on[self.c], self.u_off[self.c], self.S,
-                               p.alpha_on, p.alpha_off, THETA_SCALE, self.v[self.s], self._start, self.local)
+        self.K.summation_input(self.x, self.v[self.s], self.coef.array, self.c)
 
     def summation_iterate(self, lam: float, mom: float = 0.0) -> tuple[float]:
         return self.summation_iterate_many([(lam, mom)])[0]
@@ -150,78 +195,65 @@ class TaichiCDNFBackend:
     def summation_iterate_many(self, coefs) -> list[tuple[float]]:
         """Up to ``len(coefs)`` Summation updates in launches of :attr:`steps` ``["s"]``
         (:func:`~cdnf_ti.kernels.cdnf.summation_solve`); as :meth:`contrast_iterate_many`."""
-        p = self.params
-
         def launch(rec, chunk):
             s, n = self.s, 1 - self.s
-            self.K.summation_solve(self.S, self.v[s], self.v[n], self.row1, self.row2, self.g1, self.g2,
-                                   p.A, p.B, p.h, rec.start(chunk), len(chunk), self._tol32, RESTART_GROWTH,
-                                   self.blocks, self.mode, int(p.radius_s), self.steps["s"])
+            kern = self.K.summation_solve_kernel(self.mode, int(self.params.radius_s), self.steps["s"])
+            kern(self.x, self.v[s], self.v[n], self.coef.array, rec.start(chunk), len(chunk), self.blocks)
             res = rec.residuals(len(chunk))
-            self.s = (s + len(res)) % 2
+            self.s = (self.s + len(res)) % 2
             return res
 
         return self._launches("s", launch, coefs)
 
     def mean_activation(self) -> float:
         self._total[0] = 0.0
-        self.K.mean_activation(self.v[self.s], THETA_SCALE, self.blocks, self._total)
+        self.K.mean_activation(self.v[self.s], self.coef.array, self.blocks, self._total)
         return float(self._total[0]) / (self.shape[0] * self.shape[1])
 
     def fields(self) -> dict[str, np.ndarray]:
-        return {
-            "u_on": self.u_on[self.c].to_numpy(),
-            "u_off": self.u_off[self.c].to_numpy(),
-            "v": self.v[self.s].to_numpy(),
-            "P": self.P.to_numpy(),
-        }
-
-
-def _local_start_args(params: CDNFParams) -> tuple[np.ndarray, int]:
-    """The kernels' local-start arguments: the coefficients (float32, (2, 7)) and the switch
-    (1 when ``params.start == "local"``; the kernels then set the fields' start as they load
-    a frame and compute a Summation input)."""
-    return cdnf_local_starts(params).astype(np.float32), int(params.start == "local")
+        K, x = self.K, self.x.to_numpy()
+        return {"u_on": x[K.U_ON + self.c], "u_off": x[K.U_OFF + self.c], "v": self.v[self.s].to_numpy(),
+                "P": x[K.P_]}
 
 
 class _LaneWorkspace(LaneState):
-    """The C-DNF lane fields of one backend (:class:`LaneTaichiCDNFBackend`) for frames of ``shape``,
+    """The C-DNF lane state of one backend (:class:`LaneTaichiCDNFBackend`) for frames of ``shape``,
     with the process's scratch (:class:`~cdnf_ti.backends.workspace.LaneState`)."""
 
     def __init__(self, shape: tuple[int, int]):
         super().__init__(shape)
         ti = dsl()
         K = kernels("cdnf")
-        lane_array, lane_layout = K.lane_array, K.lane_layout
         H, W = shape
         self.W = W
-        self.e1, self.nb = lane_layout(W)
-
-        def lanes(*lead):
-            return lane_array(*lead, H=H, NB=self.nb)
-
-        self.L, self.P, self.S = lanes(), lanes(), lanes()
-        # the fields, each with its two ping-pong buffers (leading index: the parity)
-        self.u_on, self.u_off, self.v = lanes(2), lanes(2), lanes(2)
-        self.row1, self.row2 = lanes(), lanes()
-        # pending spans of the contrast group ("c") and the Summation field ("s"), per parity and row
-        self.pend = {g: ti.ndarray(K.SPAN, (2, H)) for g in ("c", "s")}
-        self.records = {"c": LaunchRecord(2), "s": LaunchRecord(1)}  # contrast, Summation launches
+        self.e1, self.nb = K.lane_layout(W)
+        #: L, P, S, the row passes and the fields (each with its two ping-pong buffers): planes of kernels/cdnf.py
+        self.x = K.lane_array(K.LANE_PLANES, H=H, NB=self.nb)
+        #: pending spans of the contrast group and the Summation field, per parity and row (SPAN_C, SPAN_S)
+        self.pend = ti.ndarray(K.SPAN, (4, H))
+        self.records = {"c": LaunchRecord(2, len(K.CONTRAST_VALUES)),  # contrast, Summation launches
+                        "s": LaunchRecord(1, len(K.SUMMATION_VALUES))}
         self.total = np.zeros(1)  # sum theta([v]+) of a Summation launch or mean_activation (-1: not computed)
 
     def all_active(self) -> None:
         """Mark every element of both groups pending (after any change made outside the kernels)."""
-        lanes_pending_all = kernels("cdnf").lanes_pending_all
-        for pend in self.pend.values():
-            lanes_pending_all(pend, self.W)
+        kernels("cdnf").lanes_pending_all(self.pend, self.W)
+
+    def spans(self, group: str) -> np.ndarray:
+        """The pending spans of ``group`` (``"c"``: contrast, ``"s"``: Summation): int32 (2, H, 2), per parity."""
+        at = layout.SPAN_C if group == "c" else layout.SPAN_S
+        return self.pend.to_numpy()[at:at + 2]
+
+    def planes(self) -> np.ndarray:
+        """Every plane's frame columns: float32 (LANE_PLANES, H, W)."""
+        x = self.x.to_numpy()
+        return np.stack([self.frame(p) for p in x])
 
 
 class LaneTaichiCDNFBackend:
-    """The fast Taichi backend: fields in lane arrays (vector ndarrays of ``LANES`` float32), kernels
+    """The fast Taichi backend: state in a lane array (vector ndarray of ``LANES`` float32), kernels
     compiled with explicit vector types (:func:`~cdnf_ti.taichi_runtime.vector_kernel`).
 
-    Same interface, equations, iteration schedule and residuals as
-    :class:`TaichiCDNFBackend`; the kernels are in :mod:`cdnf_ti.kernels.cdnf`
     (``lanes_*``). Used when the frame is at least ``2 * LANES`` pixels wide and
     the DoG radius is below ``LANES``.
 
@@ -257,20 +289,16 @@ class LaneTaichiCDNFBackend:
         self.mode = BORDER_CODES[params.border]
         self.ws = _LaneWorkspace(self.shape)  # this backend's own arrays
         self.lock = self.ws.lock  # the process's scratch: held by the model around each frame (Model.step)
-        self.nw = min(cpu_threads(), MAX_WORKERS)  # persistent workers per solve launch
-        self.tau = float(params.tol) * self.freeze
-        # W_c = k k^T with k the normalised 3-tap Gaussian (contrast_kernel is its outer product)
-        k = np.exp(-np.arange(-1, 2) ** 2 / (2.0 * params.sigma_c**2))
-        k /= k.sum()
-        self.k = (float(k[1]), float(k[0]))
+        self.coef = Coefficients(params, float(params.tol) * self.freeze, min(cpu_threads(), MAX_WORKERS))
         g1, g2 = dog_profiles(params)
-        self._taps = (tuple(float(x) for x in g1.astype(np.float32)), tuple(float(x) for x in g2.astype(np.float32)))
+        taps = (tuple(float(x) for x in g1.astype(np.float32)), tuple(float(x) for x in g2.astype(np.float32)))
+        self._contrast = K.lanes_contrast_kernel(self.W, self.mode, int(params.radius_s))
+        self._summation = K.lanes_summation_kernel(*taps, self.W, self.mode)
         self._tol32 = float(np.float32(params.tol))
-        self._start, self.local = _local_start_args(params)
         self.u0, self.v0 = resting_levels(params)
         self.c = 0
         self.s = 0
-        self._rest: tuple[np.ndarray, np.ndarray] | None = None  # resting u and v, both parities
+        self._rest = None  # the resting state of the fields' planes, both buffers (a lane array)
         self._fresh = True
         # Results the solve kernels computed on converging: S is already the Summation input of the
         # current contrast fields; the mean activation of the current Summation field.
@@ -282,6 +310,34 @@ class LaneTaichiCDNFBackend:
         with self.lock:
             self._acquire()
 
+    # -- coefficients that tests and warm-up change --------------------------
+    @property
+    def tau(self) -> float:
+        """The freezing threshold: updates ``|F(u) - u| <= tau`` leave a pixel as it is."""
+        return self.coef[layout.TAU]
+
+    @tau.setter
+    def tau(self, value: float) -> None:
+        self.coef.set(layout.TAU, value)
+
+    @property
+    def nw(self) -> int:
+        """Persistent workers per solve launch."""
+        return int(self.coef[layout.WORKERS])
+
+    @nw.setter
+    def nw(self, value: int) -> None:
+        self.coef.set(layout.WORKERS, value)
+
+    @property
+    def local(self) -> int:
+        """1: the kernels set the fields' local start as they load a frame and compute a Summation input."""
+        return int(self.coef[layout.LOCAL])
+
+    @local.setter
+    def local(self, value: int) -> None:
+        self.coef.set(layout.LOCAL, value)
+
     # -- state -------------------------------------------------------------
     def _acquire(self) -> "_LaneWorkspace":
         """This backend's arrays, set to their first state on first use."""
@@ -290,32 +346,30 @@ class LaneTaichiCDNFBackend:
             return ws
         self._s_ready, self._mean = False, None
         K = self.K
-        if self._fresh:
-            for a in (ws.u_on, ws.u_off):
-                a.fill(self.u0)
-            ws.v.fill(self.v0)
-            for a in (ws.L, ws.P, ws.S):
-                a.fill(0.0)
-            for a in (ws.u_on, ws.u_off, ws.v):
-                K.lanes_refresh_ghosts(a, self.W, self.mode)
-            self.c = self.s = 0
-            self._fresh = False
-            ws.all_active()
+        K.lanes_fill_planes(ws.x, 0, K.U_ON, 0.0)  # L, P, S, the row passes
+        K.lanes_fill_planes(ws.x, K.U_ON, K.V_, self.u0)
+        K.lanes_fill_planes(ws.x, K.V_, V_END, self.v0)
+        K.lanes_refresh_ghosts(ws.x, K.U_ON, V_END, self.W, self.mode)
+        self.c = self.s = 0
+        self._fresh = False
+        ws.all_active()
         return ws
 
     # -- backend interface ---------------------------------------------------
     def save_rest(self) -> None:
         ws = self._acquire()
         self._flush_load()
-        u, v = ws.u_on.to_numpy()[self.c], ws.v.to_numpy()[self.s]
-        self._rest = (np.stack([u, u]), np.stack([v, v]))  # both buffers at rest (built once, not per restore)
+        K = self.K
+        x = ws.x.to_numpy()
+        u, v = x[K.U_ON + self.c], x[K.V_ + self.s]
+        if self._rest is None:
+            self._rest = K.lane_array(V_END - K.U_ON, H=self.H, NB=ws.nb)
+        self._rest.from_numpy(np.stack([u, u, u, u, v, v]))  # both buffers of each field at rest
 
     def restore_rest(self) -> None:
         ws = self._acquire()
         self._flush_load()
-        u, v = self._rest
-        for f, x in ((ws.u_on, u), (ws.u_off, u), (ws.v, v)):
-            f.from_numpy(x)
+        self.K.lanes_put_planes(self._rest, ws.x, self.K.U_ON)
         self.c = self.s = 0
         ws.all_active()
         self._s_ready, self._mean = False, None
@@ -339,8 +393,7 @@ class LaneTaichiCDNFBackend:
             grey, scale, first = self._frame_in
             self._frame_in = None
             ws = self.ws
-            self.K.lanes_load_frame(grey, ws.L, ws.P, scale, first, self.W, ws.pend["c"], self.c, ws.u_on, ws.u_off,
-                                    self._start, self.local, self.mode)
+            self.K.lanes_load_frame(grey, ws.x, ws.pend, self.coef.array, self.c, scale, first, self.W, self.mode)
 
     def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> None:
         """Take an event bin (H, W each, contrast in [0, 1]): ``P = p_on - p_off``, the net signed
@@ -351,7 +404,7 @@ class LaneTaichiCDNFBackend:
     def clear_input(self) -> None:
         ws = self._acquire()
         self._flush_load()
-        ws.P.fill(0.0)
+        self.K.lanes_fill_planes(ws.x, self.K.P_, self.K.P_ + 1, 0.0)
         ws.all_active()
         self._s_ready, self._mean = False, None
 
@@ -389,7 +442,6 @@ class LaneTaichiCDNFBackend:
         also computes the Summation input (:meth:`summation_input`).
         """
         ws = self._acquire()
-        p = self.params
         c = self.c
         if self._frame_in is not None:
             (frame, scale, first), load = self._frame_in, 1
@@ -397,11 +449,8 @@ class LaneTaichiCDNFBackend:
         else:
             frame, scale, first, load = self._idle_frame, 1.0, 0, 0
         rec = ws.records["c"]
-        self.K.lanes_contrast_solve(
-            frame, load, ws.L, scale, first, ws.P, ws.u_on, ws.u_off, ws.pend["c"], c, *self.k, p.h,
-            rec.start(coefs), len(coefs), self.tau, self._tol32, RESTART_GROWTH, self.nw, ws.sync, ws.rbuf,
-            self.W, self.mode, ws.S, ws.pend["s"], p.alpha_on, p.alpha_off, THETA_SCALE, ws.v, self.s, self._start,
-            self.local, int(p.radius_s))
+        self._contrast(frame, ws.x, ws.pend, rec.start(coefs, (c, self.s, len(coefs), load, first, scale)),
+                       self.coef.array)
         res = rec.residuals(len(coefs))
         self.c = (c + len(res)) % 2
         self._s_ready = bool(res) and max(res[-1]) <= self._tol32
@@ -415,10 +464,8 @@ class LaneTaichiCDNFBackend:
         if self._s_ready:
             self._s_ready = False
             return
-        p = self.params
-        self.K.lanes_summation_input(ws.u_on, ws.u_off, self.c, ws.S, p.alpha_on, p.alpha_off, THETA_SCALE,
-                                     self.W, ws.pend["s"], ws.v, self.s, self._start, self.local, self.mode,
-                                     int(p.radius_s))
+        self.K.lanes_summation_input(ws.x, ws.pend, self.coef.array, self.c, self.s, self.W, self.mode,
+                                     int(self.params.radius_s))
 
     def summation_iterate(self, lam: float, mom: float = 0.0) -> tuple[float]:
         return self.summation_iterate_many([(lam, mom)])[0]
@@ -429,13 +476,9 @@ class LaneTaichiCDNFBackend:
         A launch that converges also computes the mean activation (:meth:`mean_activation`).
         """
         ws = self._acquire()
-        p = self.params
         s = self.s
-        kern = self.K.lanes_summation_kernel(*self._taps)
         rec = ws.records["s"]
-        kern(ws.S, ws.v, ws.row1, ws.row2, ws.pend["s"], s, p.A, p.B, p.h, rec.start(coefs), len(coefs),
-             self.tau, self._tol32, RESTART_GROWTH, self.nw, ws.sync, ws.rbuf, self.W, self.mode, THETA_SCALE,
-             ws.msum, ws.total)
+        self._summation(ws.x, ws.pend, rec.start(coefs, (s, len(coefs))), self.coef.array, ws.total)
         res = rec.residuals(len(coefs))
         self.s = (s + len(res)) % 2
         total = float(ws.total[0])
@@ -449,18 +492,14 @@ class LaneTaichiCDNFBackend:
             mean, self._mean = self._mean, None
             return mean
         ws.total[0] = 0.0
-        self.K.lanes_mean_activation(ws.v, self.s, THETA_SCALE, self.W, ws.total)
+        self.K.lanes_mean_activation(ws.x, self.coef.array, self.s, self.W, ws.total)
         return float(ws.total[0]) / (self.H * self.W)
 
     def fields(self) -> dict[str, np.ndarray]:
         ws = self._acquire()
         self._flush_load()
-        return {
-            "u_on": self.ws.frame(ws.u_on.to_numpy()[self.c]),
-            "u_off": self.ws.frame(ws.u_off.to_numpy()[self.c]),
-            "v": self.ws.frame(ws.v.to_numpy()[self.s]),
-            "P": self.ws.frame(ws.P.to_numpy()),
-        }
+        K, x = self.K, ws.planes()
+        return {"u_on": x[K.U_ON + self.c], "u_off": x[K.U_OFF + self.c], "v": x[K.V_ + self.s], "P": x[K.P_]}
 
 
 def make_backend(model, shape: tuple[int, int], arch: str) -> TaichiCDNFBackend | LaneTaichiCDNFBackend:

@@ -11,7 +11,8 @@ from .events import load_net_contrast
 
 
 class TaichiSDNFBackend:
-    """SDNF field state in Taichi ndarrays (float32), driven by :mod:`cdnf_ti.kernels.sdnf`."""
+    """SDNF field state in one stacked Taichi ndarray (float32, planes of :mod:`cdnf_ti.kernels.sdnf`),
+    driven by its kernels; the model's coefficients in one small array set once."""
 
     name = "taichi"
 
@@ -23,33 +24,31 @@ class TaichiSDNFBackend:
         self.params = params
         self.shape = tuple(shape)
         self.blocks = common.column_blocks(self.shape[1], arch)  # work items per row
-        nd = lambda: ti.ndarray(ti.f32, self.shape)  # noqa: E731
-        self.L, self.P, self.E, self.row1, self.row2 = nd(), nd(), nd(), nd(), nd()
-        self.u = [nd(), nd()]
-        self.F = [nd(), nd()]  # firing rates f(u), kept so the lateral pass reads them once
-        g1, g2 = params.dog_profiles()
-        self.g1 = ti.ndarray(ti.f32, g1.shape)
-        self.g2 = ti.ndarray(ti.f32, g2.shape)
-        self.g1.from_numpy(g1.astype(np.float32))
-        self.g2.from_numpy(g2.astype(np.float32))
+        self.x = ti.ndarray(ti.f32, (self.K.PLANES, *self.shape))  # L, P, E, u
+        self.rows = ti.ndarray(ti.f32, (2, *self.shape))  # the DoG's row passes
+        self.F = [ti.ndarray(ti.f32, self.shape) for _ in range(2)]  # f(u) of the last two frames
+        coefs = coefficients(params)
+        self.coef = ti.ndarray(ti.f32, coefs.shape)  # on the device once, not copied per launch
+        self.coef.from_numpy(coefs)
+        self._update = self.K.field_update_kernel(int(params.radius))
         self._load_out = np.zeros(1)  # load_binary's sum E
         self._update_out = np.zeros(1)  # field_update's sum F
         self.reset()
 
     def reset(self) -> None:
-        for a in (self.L, self.P, self.E, self.row1, self.row2):
-            self.K.fill(a, 0.0)
-        for a in self.u:
-            self.K.fill(a, -self.params.h)
+        K = self.K
+        K.fill_planes(self.x, 0, K.PLANES, 0.0)
+        K.fill_planes(self.x, K.U_, K.U_ + 1, -self.params.h)
+        K.fill_planes(self.rows, 0, 2, 0.0)
         for a in self.F:
-            self.K.fill(a, 0.0)
+            K.fill(a, 0.0)
         self.c = 0
 
     def load(self, grey: np.ndarray, first: bool) -> float:
         scale = 1.0 / 255.0 if grey.dtype == np.uint8 else 1.0
         out = self._load_out
         out.fill(0.0)
-        self.K.load_binary(grey, self.L, self.P, self.E, scale, int(first), self.params.t_b, self.blocks, out)
+        self.K.load_binary(grey, self.x, self.coef, scale, int(first), self.blocks, out)
         return float(out[0]) / (self.shape[0] * self.shape[1])
 
     def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> float:
@@ -58,18 +57,24 @@ class TaichiSDNFBackend:
         return load_net_contrast(self, p_on, p_off)
 
     def update(self, b_t: float) -> float:
-        p = self.params
-        c, n = self.c, 1 - self.c
         out = self._update_out
         out.fill(0.0)
-        self.K.field_update(self.E, self.F[c], self.row1, self.row2, self.u[n], self.F[n], self.g1, self.g2,
-                            p.A, b_t, p.h, THETA_SCALE, self.blocks, int(p.radius), out)
-        self.c = n
+        self._update(self.x, self.F[self.c], self.F[1 - self.c], self.rows, self.coef, b_t, self.blocks, out)
+        self.c = 1 - self.c
         return float(out[0]) / (self.shape[0] * self.shape[1])
 
     def fields(self) -> dict[str, np.ndarray]:
-        return {"P": self.P.to_numpy(), "E": self.E.to_numpy(), "u": self.u[self.c].to_numpy(),
-                "activity": self.F[self.c].to_numpy()}
+        K, x = self.K, self.x.to_numpy()
+        return {"P": x[K.P_], "E": x[K.E_], "u": x[K.U_], "activity": self.F[self.c].to_numpy()}
+
+
+def coefficients(params: SDNFParams) -> np.ndarray:
+    """SDNF's coefficient array (float32; slots of :mod:`cdnf_ti.kernels.sdnf`): ``A``, ``h``, theta's
+    scale, ``T_b``, then the DoG profiles ``g1``, ``g2``."""
+    g1, g2 = params.dog_profiles()
+    head = [params.A, params.h, THETA_SCALE, params.t_b]
+    return np.concatenate([np.asarray(head, np.float64).astype(np.float32),
+                           g1.astype(np.float32), g2.astype(np.float32)])
 
 
 def make_backend(model, shape: tuple[int, int], arch: str) -> TaichiSDNFBackend:
