@@ -170,8 +170,10 @@ def feedback_iterate_start(model):
     be = model._be
     if isinstance(be, LaneTaichiFLGMDBackend):
         ws = be._acquire()
-        return ws.frame(ws.on.to_numpy()[be.iterate[0]]), ws.frame(ws.off.to_numpy()[be.iterate[1]])
-    return be.on[be.c].to_numpy(), be.off[be.c].to_numpy()
+        st = ws.state.to_numpy()
+        return ws.frame(st[be._on(be.iterate[0])]), ws.frame(st[be._off(be.iterate[1])])
+    st = be.st.to_numpy()
+    return st[be.on[be.c]], st[be.off[be.c]]
 
 
 @pytest.mark.parametrize("start", FEEDBACK_STARTS)

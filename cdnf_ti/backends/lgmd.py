@@ -19,13 +19,43 @@ from .events import load_net_contrast
 from .workspace import LaneState
 
 
-class TaichiLGMDBackend:
-    """Layers of an LGMD-family model in Taichi ndarrays (float32), driven by :mod:`cdnf_ti.kernels.lgmd`.
+def coefficient_array(K: Any, values: dict[int, Any]) -> np.ndarray:
+    """A model's coefficients as the float32 array of the kernels (``K.N_COEFS`` long): ``values`` maps
+    an index of :mod:`cdnf_ti.kernels.lgmd` (``K.CLIP``, ``K.KN``...) to a value, or to a sequence
+    that fills consecutive entries from there; the rest are 0."""
+    a = np.zeros(K.N_COEFS, np.float32)
+    for k, v in values.items():
+        v = np.atleast_1d(np.asarray(v, np.float64))
+        a[k:k + len(v)] = v  # rounded to float32 as a float32 kernel argument would be
+    return a
 
-    The family's shared part: photoreceptors ``L``/``P``, the ON/OFF channel
-    buffers, ``load``, ``reset`` and ``fields``. Each model's subclass names its
-    own layers (``LAYERS``), sets its constants (:meth:`_setup`) and runs its
-    kernels.
+
+class StateLayout:
+    """Where a model's layers and channel buffers sit in its state array (leading axis).
+
+    Parameters
+    ----------
+    layers : tuple of str
+        The model's layers (:data:`cdnf_ti.kernels.lgmd.STATE_LAYERS`), first in the array.
+    buffers : int
+        Buffers per ON/OFF channel, after the layers: ON's, then OFF's.
+    """
+
+    def __init__(self, layers: tuple[str, ...], buffers: int):
+        self.index = {name: k for k, name in enumerate(layers)}
+        self.on = [len(layers) + b for b in range(buffers)]  # ON's buffers
+        self.off = [len(layers) + buffers + b for b in range(buffers)]  # OFF's buffers
+        self.size = len(layers) + 2 * buffers
+
+
+class TaichiLGMDBackend:
+    """Layers of an LGMD-family model in one Taichi ndarray (float32, (layers, H, W)), driven by
+    :mod:`cdnf_ti.kernels.lgmd`.
+
+    The family's shared part: the state array ``st`` (photoreceptors ``L``/``P``, the model's
+    layers, the ON/OFF channel buffers; :class:`StateLayout`), the coefficient array ``coef``
+    (set once, :meth:`_coefficients`), ``load``, ``reset`` and ``fields``. Each model's subclass
+    names its layers (``MODEL``, ``LAYERS``), sets its constants (:meth:`_setup`) and runs its kernels.
 
     Parameters
     ----------
@@ -37,7 +67,9 @@ class TaichiLGMDBackend:
     """
 
     name = "taichi"
-    #: The model's own layers besides ``P``, ``ON``, ``OFF`` (allocated here, listed by :meth:`fields`).
+    #: The model's key in :data:`cdnf_ti.kernels.lgmd.STATE_LAYERS`.
+    MODEL: ClassVar[str]
+    #: The model's own layers that :meth:`fields` lists besides ``P``, ``ON``, ``OFF``.
     LAYERS: tuple[str, ...] = ()
     #: Buffers per ON/OFF channel (current and previous frame).
     CHANNEL_BUFFERS = 2
@@ -50,39 +82,34 @@ class TaichiLGMDBackend:
         self.shape = tuple(shape)
         self.blocks = common.column_blocks(self.shape[1], arch)  # work items per row
         self.dt = dt
-        self._arrays: list[Any] = []
         self._load_out = np.zeros(1)  # load_frame's sum |P|
-        self.L, self.P = self._nd(), self._nd()
-        self.on = [self._nd() for _ in range(self.CHANNEL_BUFFERS)]
-        self.off = [self._nd() for _ in range(self.CHANNEL_BUFFERS)]
-        for layer in self.LAYERS:
-            setattr(self, layer, self._nd())
+        self.layout = StateLayout(self.K.STATE_LAYERS[self.MODEL], self.CHANNEL_BUFFERS)
+        self.on, self.off = list(self.layout.on), list(self.layout.off)  # the channels' buffers (indices)
+        ti = dsl()  # taichi or quadrants, chosen at run time
+        self.st = ti.ndarray(ti.f32, (self.layout.size, *self.shape))
         self._setup()
+        self.coef = ti.ndarray(ti.f32, self.K.N_COEFS)
+        self.coef.from_numpy(coefficient_array(self.K, self._coefficients()))
         self.reset()
 
-    def _nd(self) -> Any:
-        """A new (H, W) float32 ndarray, zeroed by :meth:`reset`."""
-        ti = dsl()  # taichi or quadrants, chosen at run time
-        a = ti.ndarray(ti.f32, self.shape)
-        self._arrays.append(a)
-        return a
-
     def _setup(self) -> None:
-        """The model's constants (delay coefficients, kernels) and extra buffers."""
+        """The model's constants (delay coefficients, kernels) and result arrays."""
+
+    def _coefficients(self) -> dict[int, Any]:
+        """The model's coefficients for :func:`coefficient_array` (set once, in ``coef``)."""
+        p = self.params
+        return {self.K.CLIP: p.clip, self.K.DC: p.dc}
 
     def reset(self) -> None:
-        for a in self._arrays:
-            self.K.fill(a, 0.0)
+        self.st.fill(0.0)
         self.c = 0  # index of the current ON/OFF buffers
 
     def load(self, grey: np.ndarray, first: bool) -> float:
-        """Photoreceptors and this frame's ON/OFF channels (into :meth:`_channel_targets`); returns ``sum |P|``."""
+        """Photoreceptors and this frame's ON/OFF channels (into :meth:`_channel_buffers`); returns ``sum |P|``."""
         scale = 1.0 if grey.dtype == np.uint8 else 255.0
-        p = self.params
         out = self._load_out
         out.fill(0.0)
-        self.K.load_frame(grey, self.L, self.P, *self._channel_targets(), scale, int(first), p.clip, p.dc,
-                          self.blocks, out)
+        self.K.load_frame(grey, self.st, *self._channel_buffers(), scale, int(first), self.coef, self.blocks, out)
         return float(out[0])
 
     def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> float:
@@ -90,11 +117,12 @@ class TaichiLGMDBackend:
         grey levels; returns what :meth:`load` returns (``sum |P|``)."""
         return load_net_contrast(self, p_on, p_off)
 
-    def _channel_targets(self) -> tuple[Any, Any, Any, Any]:
-        """``(ON, OFF, ON(t-1), OFF(t-1))`` buffers of :meth:`load`: the next ping-pong buffers,
-        made current by :meth:`_next_buffers` when the layers run (an FFI-held frame keeps the old ones)."""
+    def _channel_buffers(self) -> tuple[int, int, int, int]:
+        """``(ON(t-1), OFF(t-1), ON, OFF)`` buffers of :meth:`load`: the new channels go into the next
+        ping-pong buffers, made current by :meth:`_next_buffers` when the layers run (an FFI-held frame
+        keeps the old ones)."""
         c, n = self.c, 1 - self.c
-        return self.on[n], self.off[n], self.on[c], self.off[c]
+        return self.on[c], self.off[c], self.on[n], self.off[n]
 
     def _next_buffers(self) -> tuple[int, int]:
         """Make the other ON/OFF buffers current: ``(current, previous)`` indices."""
@@ -103,59 +131,82 @@ class TaichiLGMDBackend:
         return c, q
 
     def fields(self) -> dict[str, np.ndarray]:
+        st = self.st.to_numpy()
         c = self.c
-        out = {"P": self.P.to_numpy(), "ON": self.on[c].to_numpy(), "OFF": self.off[c].to_numpy()}
+        out = {"P": st[self.K.P_], "ON": st[self.on[c]], "OFF": st[self.off[c]]}
         for k in self.LAYERS:
-            out[k] = getattr(self, k).to_numpy()
+            out[k] = st[self.layout.index[k]]
         return out
+
+
+def _lgmd2_coefficients(K: Any, p: Any, dt: int) -> dict[int, Any]:
+    """LGMD2's coefficients (:func:`coefficient_array`)."""
+    return {K.KN: p.k_on, K.AN: [lowpass_coefficient(dt, t) for t in p.tau_on],
+            K.KF: p.k_off, K.AF: [lowpass_coefficient(dt, t) for t in p.tau_off],
+            K.E_WEIGHTS: (p.w_on_exc, p.w_off_exc, p.w_onoff),
+            K.DELTA_C: p.delta_c, K.C_W: p.c_w, K.C_DE: p.c_de, K.T_DE: p.t_de}
+
+
+def _lgmd1_coefficients(K: Any, p: Any, dt: int) -> dict[int, Any]:
+    """LGMD1's coefficients (:func:`coefficient_array`)."""
+    return {K.K1: p.k_lateral, K.A1: [lowpass_coefficient(dt, t) for t in p.tau_lateral],
+            K.W_I_ON: p.w_i_on, K.W_I_OFF: p.w_i_off,
+            K.E_WEIGHTS: (p.w_on_exc, p.w_off_exc, p.w_onoff), K.T_S: p.t_s}
+
+
+def _flgmd_coefficients(K: Any, p: Any, dt: int) -> dict[int, Any]:
+    """F-LGMD's coefficients of both paths (:func:`coefficient_array`)."""
+    a = [lowpass_coefficient(dt, t) for t in p.tau_lateral]
+    w_on, w_off = p.feedback_stencils(dt)
+    start_on, start_off = p.local_start_gains(dt)
+    # edge and diagonal weights of Q = w_i sum K (1 - a) X(t-1), per channel (the lane load's)
+    q_weights = [w * k * (1.0 - x) for w in (p.w_i_on, p.w_i_off) for k, x in zip(p.k_lateral, a)]
+    return {K.K1: p.k_lateral, K.A1: a, K.W_I_ON: p.w_i_on, K.W_I_OFF: p.w_i_off, K.T_S: p.t_s,
+            K.WN: w_on, K.WF: w_off, K.BETA_ON: p.beta_on, K.BETA_OFF: p.beta_off, K.QN1: q_weights,
+            K.START_WN: (*start_on, *start_off), K.TOL: np.float32(p.tol), K.GROW: RESTART_GROWTH}
 
 
 class TaichiLGMD2Backend(TaichiLGMDBackend):
     """LGMD2 layers in Taichi (see :class:`LGMD2`)."""
 
+    MODEL = "lgmd2"
     LAYERS = ("I_on", "I_off", "S", "Ce", "G")
 
     def _setup(self) -> None:
-        p, dt = self.params, self.dt
-        self.an = tuple(lowpass_coefficient(dt, t) for t in p.tau_on)
-        self.af = tuple(lowpass_coefficient(dt, t) for t in p.tau_off)
         self._layers_out = np.zeros(2)  # lgmd2_layers' sum G, max |Ce|
+
+    def _coefficients(self) -> dict[int, Any]:
+        return {**super()._coefficients(), **_lgmd2_coefficients(self.K, self.params, self.dt)}
 
     def layers(self, w_on: float, w_off: float) -> tuple[float, float]:
         """Delayed inhibition, S, grouping (ON/OFF from :meth:`load`); returns ``(sum G, max |Ce|)``."""
-        p = self.params
         c, q = self._next_buffers()
         out = self._layers_out
         out.fill(0.0)
-        self.K.lgmd2_layers(self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.I_off,
-                            self.S, self.Ce, self.G, w_on, w_off,
-                            *p.k_on, *self.an, *p.k_off, *self.af, p.w_on_exc, p.w_off_exc, p.w_onoff,
-                            p.delta_c, p.c_w, p.c_de, p.t_de, self.blocks, out)
+        self.K.lgmd2_layers(self.st, self.on[c], self.on[q], w_on, w_off, self.coef, self.blocks, out)
         return float(out[0]), float(out[1])
 
 
 class LGMDLanes(LaneState):
-    """The lane fields of an LGMD-family model for one frame size (:class:`LaneTaichiLGMDBackend`).
+    """The lane state of an LGMD-family model for one frame size (:class:`LaneTaichiLGMDBackend`).
 
-    Every layer in :attr:`LAYERS` is a lane array (a vector ndarray, ``LANES`` float32 per element,
-    shape (H, NB); :func:`~cdnf_ti.kernels.common.lane_array`) in the lane
-    layout of :mod:`cdnf_ti.kernels.common`; the channels ``on``/``off`` have
-    :attr:`CHANNEL_BUFFERS` buffers (leading index). Each backend has its own (each model its own
-    subclass, naming its layers); the scratch is the process's (:class:`~cdnf_ti.backends.workspace.Scratch`).
+    ``state``: one lane array (a vector ndarray, ``LANES`` float32 per element,
+    shape (layers, H, NB); :func:`~cdnf_ti.kernels.common.lane_array`) in the lane
+    layout of :mod:`cdnf_ti.kernels.common`, holding the model's layers and its channels'
+    :attr:`CHANNEL_BUFFERS` buffers each (:class:`StateLayout`). Each backend has its own (each
+    model its own subclass); the scratch is the process's (:class:`~cdnf_ti.backends.workspace.Scratch`).
     """
 
-    LAYERS: ClassVar[tuple[str, ...]] = ("L", "P", "on", "off")
+    MODEL: ClassVar[str]
     CHANNEL_BUFFERS: ClassVar[int] = 2
 
     def __init__(self, shape: tuple[int, int]):
         super().__init__(shape)
         C = kernels("common")
-        lane_array, lane_layout = C.lane_array, C.lane_layout
         H, W = shape
-        _, nb = lane_layout(W)
-        for name in self.LAYERS:
-            lead = (self.CHANNEL_BUFFERS,) if name in ("on", "off") else ()
-            setattr(self, name, lane_array(*lead, H=H, NB=nb))
+        _, nb = C.lane_layout(W)
+        self.layout = StateLayout(kernels("lgmd").STATE_LAYERS[self.MODEL], self.CHANNEL_BUFFERS)
+        self.state = C.lane_array(self.layout.size, H=H, NB=nb)
 
 
 class LaneTaichiLGMDBackend:
@@ -164,7 +215,8 @@ class LaneTaichiLGMDBackend:
 
     Same interface, equations and results as the model's ndarray backend
     (:class:`TaichiLGMDBackend`); the kernels are the ``lanes_*`` ones of
-    :mod:`cdnf_ti.kernels.lgmd`. Each backend owns its fields (:attr:`workspace_type`).
+    :mod:`cdnf_ti.kernels.lgmd`. Each backend owns its state (:attr:`workspace_type`) and
+    its coefficient array ``coef`` (set once).
 
     Parameters
     ----------
@@ -179,8 +231,6 @@ class LaneTaichiLGMDBackend:
     workspace_type: ClassVar[type[LGMDLanes]]
     #: Layers listed by :meth:`fields` besides ``P``, ``ON``, ``OFF``.
     FIELD_LAYERS: ClassVar[tuple[str, ...]] = ()
-    #: Work items per row of the load kernel (element blocks), so both CPU threads get rows.
-    BLOCKS = 4
 
     @staticmethod
     def supports(shape: tuple[int, int], arch: str = "cpu") -> bool:
@@ -199,21 +249,35 @@ class LaneTaichiLGMDBackend:
         self.lock = self.ws.lock  # the process's scratch: held by the model around each frame (Model.step)
         self._load_out = np.zeros(1)  # lgmd_lanes_load's sum |P|
         self._setup()
+        ti = dsl()
+        self.coef = ti.ndarray(ti.f32, self.K.N_COEFS)
+        self.coef.from_numpy(coefficient_array(self.K, self._coefficients()))
         with self.lock:
             self.reset()
 
     def _setup(self) -> None:
         """The model's constants."""
 
+    def _coefficients(self) -> dict[int, Any]:
+        """The model's coefficients for :func:`coefficient_array` (set once, in ``coef``)."""
+        p = self.params
+        return {self.K.CLIP: p.clip, self.K.DC: p.dc}
+
     def _acquire(self) -> LGMDLanes:
         """This backend's arrays."""
         return self.ws
 
+    def _on(self, b: int) -> int:
+        """Buffer ``b`` of the ON channel (its index in the state)."""
+        return self.ws.layout.on[b]
+
+    def _off(self, b: int) -> int:
+        """Buffer ``b`` of the OFF channel (its index in the state)."""
+        return self.ws.layout.off[b]
+
     # -- backend interface ---------------------------------------------------
     def reset(self) -> None:
-        ws = self._acquire()
-        for name in ws.LAYERS:
-            getattr(ws, name).fill(0.0)
+        self._acquire().state.fill(0.0)
         self._reset_buffers()
 
     def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> float:
@@ -225,19 +289,17 @@ class LaneTaichiLGMDBackend:
         """Back to the first buffers of the channels."""
 
     def _load(self, grey: np.ndarray, first: bool, c_on: int, s_on: int, c_off: int, s_off: int,
-              feedback: tuple = ()) -> float:
+              feedback: bool = False) -> float:
         """:func:`cdnf_ti.kernels.lgmd.lgmd_lanes_load`: channels ``s`` from ``c``; returns ``sum |P|``.
 
-        ``feedback``: F-LGMD's ``(on0, off0, q_on, q_off, qn1, qn2, qf1, qf2, wn, kn, wf, kf)``, else empty.
+        ``feedback``: F-LGMD's drives, constant inhibition and iterate's start too.
         """
         ws = self._acquire()
-        p = self.params
         scale = 1.0 if grey.dtype == np.uint8 else 255.0
-        extra = feedback or (ws.P, ws.P, ws.P, ws.P) + (0.0,) * 8  # not read without feedback
         out = self._load_out
         out.fill(0.0)
-        self.K.lgmd_lanes_load(grey, ws.L, ws.P, ws.on, ws.off, c_on, s_on, c_off, s_off, scale, int(first),
-                               p.clip, p.dc, self.W, self.BLOCKS, bool(feedback), *extra, out)
+        self.K.lgmd_lanes_load(grey, ws.state, self._on(c_on), self._on(s_on), self._off(c_off), self._off(s_off),
+                               scale, int(first), self.coef, self.W, feedback, out)
         return float(out[0])
 
     def _channel_buffers(self) -> tuple[int, int]:
@@ -246,11 +308,12 @@ class LaneTaichiLGMDBackend:
 
     def fields(self) -> dict[str, np.ndarray]:
         ws = self._acquire()
+        st = ws.state.to_numpy()
         b_on, b_off = self._channel_buffers()
-        out = {"P": ws.frame(ws.P.to_numpy()), "ON": ws.frame(ws.on.to_numpy()[b_on]),
-               "OFF": ws.frame(ws.off.to_numpy()[b_off])}
+        out = {"P": ws.frame(st[self.K.P_]), "ON": ws.frame(st[self._on(b_on)]),
+               "OFF": ws.frame(st[self._off(b_off)])}
         for name in self.FIELD_LAYERS:
-            out[name] = ws.frame(getattr(ws, name).to_numpy())
+            out[name] = ws.frame(st[ws.layout.index[name]])
         return out
 
 
@@ -276,7 +339,7 @@ class PingPongLaneLGMDBackend(LaneTaichiLGMDBackend):
 
 
 class _LGMD2Lanes(LGMDLanes):
-    LAYERS = ("L", "P", "on", "off", "I_on", "I_off", "S", "Ce", "G")
+    MODEL = "lgmd2"
 
 
 class LaneTaichiLGMD2Backend(PingPongLaneLGMDBackend):
@@ -286,48 +349,44 @@ class LaneTaichiLGMD2Backend(PingPongLaneLGMDBackend):
     FIELD_LAYERS = ("I_on", "I_off", "S", "Ce", "G")
 
     def _setup(self) -> None:
-        p, dt = self.params, self.dt
-        self.an = tuple(lowpass_coefficient(dt, t) for t in p.tau_on)
-        self.af = tuple(lowpass_coefficient(dt, t) for t in p.tau_off)
         self._layers_out = np.zeros(2)  # lgmd2_lanes_layers' sum G, max |Ce|
+
+    def _coefficients(self) -> dict[int, Any]:
+        return {**super()._coefficients(), **_lgmd2_coefficients(self.K, self.params, self.dt)}
 
     def layers(self, w_on: float, w_off: float) -> tuple[float, float]:
         """Delayed inhibition, S, grouping (ON/OFF from :meth:`load`); returns ``(sum G, max |Ce|)``."""
         ws = self._acquire()
-        p = self.params
         c, q = self._next_buffers()
         out = self._layers_out
         out.fill(0.0)
-        self.K.lgmd2_lanes_layers(ws.on, ws.off, c, q, ws.I_on, ws.I_off, ws.S, ws.Ce, ws.G, w_on, w_off,
-                                  *p.k_on, *self.an, *p.k_off, *self.af, p.w_on_exc, p.w_off_exc, p.w_onoff,
-                                  p.delta_c, p.c_w, p.c_de, p.t_de, self.nw, ws.sync, ws.rbuf, ws.msum, self.W, out)
+        self.K.lgmd2_lanes_layers(ws.state, self._on(c), self._on(q), w_on, w_off, self.coef, self.nw, self.W, out)
         return float(out[0]), float(out[1])
 
 
 class TaichiLGMD1Backend(TaichiLGMDBackend):
     """LGMD1 layers in Taichi (see :class:`LGMD1`)."""
 
+    MODEL = "lgmd1"
     LAYERS = ("I_on", "E_off", "S", "G")
 
     def _setup(self) -> None:
-        p, dt = self.params, self.dt
-        self.a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
         self._layers_out = np.zeros(1)  # lgmd1_layers' sum G
+
+    def _coefficients(self) -> dict[int, Any]:
+        return {**super()._coefficients(), **_lgmd1_coefficients(self.K, self.params, self.dt)}
 
     def layers(self) -> float:
         """Delayed spreads, S (thresholded), G (ON/OFF from :meth:`load`); returns ``sum G``."""
-        p = self.params
         c, q = self._next_buffers()
         out = self._layers_out
         out.fill(0.0)
-        self.K.lgmd1_layers(self.on[c], self.off[c], self.on[q], self.off[q], self.I_on, self.E_off,
-                            self.S, self.G, p.w_i_on, p.w_i_off, *p.k_lateral, *self.a,
-                            p.w_on_exc, p.w_off_exc, p.w_onoff, p.t_s, self.blocks, out)
+        self.K.lgmd1_layers(self.st, self.on[c], self.on[q], self.coef, self.blocks, out)
         return float(out[0])
 
 
 class _LGMD1Lanes(LGMDLanes):
-    LAYERS = ("L", "P", "on", "off", "I_on", "E_off", "S", "G")
+    MODEL = "lgmd1"
 
 
 class LaneTaichiLGMD1Backend(PingPongLaneLGMDBackend):
@@ -337,20 +396,18 @@ class LaneTaichiLGMD1Backend(PingPongLaneLGMDBackend):
     FIELD_LAYERS = ("I_on", "E_off", "S", "G")
 
     def _setup(self) -> None:
-        p, dt = self.params, self.dt
-        self.a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
         self._layers_out = np.zeros(1)  # lgmd1_lanes_layers' sum G
+
+    def _coefficients(self) -> dict[int, Any]:
+        return {**super()._coefficients(), **_lgmd1_coefficients(self.K, self.params, self.dt)}
 
     def layers(self) -> float:
         """Delayed spreads, S (thresholded), G (ON/OFF from :meth:`load`); returns ``sum G``."""
         ws = self._acquire()
-        p = self.params
         c, q = self._next_buffers()
         out = self._layers_out
         out.fill(0.0)
-        self.K.lgmd1_lanes_layers(ws.on, ws.off, c, q, ws.I_on, ws.E_off, ws.S, ws.G, p.w_i_on, p.w_i_off,
-                                  *p.k_lateral, *self.a, p.w_on_exc, p.w_off_exc, p.w_onoff, p.t_s, self.nw,
-                                  ws.sync, ws.rbuf, ws.msum, self.W, out)
+        self.K.lgmd1_lanes_layers(ws.state, self._on(c), self._on(q), self.coef, self.nw, self.W, out)
         return float(out[0])
 
 
@@ -363,37 +420,33 @@ class TaichiFLGMDBackend(TaichiLGMDBackend):
     fixed point.
     """
 
+    MODEL = "flgmd_onn"
     LAYERS = ("S_on", "S_off", "S", "G")
     #: Current, previous (settled) and scratch buffers per channel.
     CHANNEL_BUFFERS = 3
 
     def _setup(self) -> None:
-        p, dt = self.params, self.dt
-        self.on0, self.off0 = self._nd(), self._nd()
-        self.q_on, self.q_off = self._nd(), self._nd()
-        self.a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
-        self.w_on, self.w_off = p.feedback_stencils(dt)
-        start_on, start_off = p.local_start_gains(dt)
-        self.start_gains = (*start_on, *start_off)  # w, kappa of ON, then of OFF
         self._iterate_out = np.zeros(2)  # flgmd_iterate's residuals of ON, OFF
         self._finish_out = np.zeros(1)  # flgmd_finish's sum G
+
+    def _coefficients(self) -> dict[int, Any]:
+        return {**super()._coefficients(), **_flgmd_coefficients(self.K, self.params, self.dt)}
 
     def reset(self) -> None:
         super().reset()
         self.pi = 1  # index of the previous (settled) buffers
         self.ni = 2  # scratch buffers
 
-    def _channel_targets(self) -> tuple[Any, Any, Any, Any]:
+    def _channel_buffers(self) -> tuple[int, int, int, int]:
         """The drives ``ON0``/``OFF0`` from the settled channels ``on[c]``/``off[c]``."""
-        return self.on0, self.off0, self.on[self.c], self.off[self.c]
+        index = self.layout.index
+        return self.on[self.c], self.off[self.c], index["on0"], index["off0"]
 
     def prepare(self) -> None:
         # the settled current buffers become the previous ones
         self.pi, self.c = self.c, self.pi
-        p = self.params
-        self.K.flgmd_prepare(self.on0, self.off0, self.on[self.c], self.off[self.c], self.on[self.pi],
-                             self.off[self.pi], self.q_on, self.q_off, *p.k_lateral, *self.a,
-                             p.w_i_on, p.w_i_off, *self.start_gains, self.blocks)
+        self.K.flgmd_prepare(self.st, self.on[self.c], self.off[self.c], self.on[self.pi], self.off[self.pi],
+                             self.coef, self.blocks)
 
     def feedback_iterate(self, lam: float, mom: float = 0.0) -> tuple[float, float]:
         """One update ``X <- X + mom (X - X_prev) + lam (T(X) - X)``; returns the residuals before it."""
@@ -402,9 +455,8 @@ class TaichiFLGMDBackend(TaichiLGMDBackend):
         with_off = p.beta_off != 0.0
         out = self._iterate_out
         out.fill(0.0)
-        self.K.flgmd_iterate(self.on0, self.off0, self.on[c], self.off[c], self.q_on, self.q_off,
-                             self.on[n], self.off[n], *self.w_on, *self.w_off,
-                             p.beta_on, p.beta_off, lam, mom, self.blocks, with_off, out)
+        self.K.flgmd_iterate(self.st, self.on[c], self.off[c], self.on[n], self.off[n], lam, mom, self.coef,
+                             self.blocks, with_off, out)
         if with_off:
             self.c, self.ni = n, c
         else:
@@ -413,12 +465,10 @@ class TaichiFLGMDBackend(TaichiLGMDBackend):
         return float(out[0]), float(out[1])
 
     def finish(self) -> float:
-        p = self.params
         c = self.c
         out = self._finish_out
         out.fill(0.0)
-        self.K.flgmd_finish(self.on[c], self.off[c], self.q_on, self.q_off, self.S_on, self.S_off,
-                            self.S, self.G, *self.w_on, *self.w_off, p.t_s, self.blocks, out)
+        self.K.flgmd_finish(self.st, self.on[c], self.off[c], self.coef, self.blocks, out)
         return float(out[0])
 
     def hold(self) -> None:
@@ -426,7 +476,7 @@ class TaichiFLGMDBackend(TaichiLGMDBackend):
 
 
 class _FLGMDLanes(LGMDLanes):
-    LAYERS = ("L", "P", "on", "off", "on0", "off0", "q_on", "q_off", "S_on", "S_off", "S", "G")
+    MODEL = "flgmd_onn"
     #: the settled channel of the last frame and two buffers for the iteration
     CHANNEL_BUFFERS = 3
 
@@ -445,19 +495,15 @@ class LaneTaichiFLGMDBackend(LaneTaichiLGMDBackend):
     FIELD_LAYERS = TaichiFLGMDBackend.LAYERS
 
     def _setup(self) -> None:
-        p, dt = self.params, self.dt
         self.steps = MAX_STEPS  # updates per solve launch (feedback_iterate_many)
-        self._tol32 = float(np.float32(p.tol))
         self._sum_g: float | None = None  # sum G computed by a converged solve launch
         self._record = LaunchRecord(2)  # flgmd_lanes_solve's coefficients in, residuals out
         self._solve_out = np.zeros(1)  # flgmd_lanes_solve's sum G (-1: not converged)
         self._finish_out = np.zeros(1)  # flgmd_lanes_finish's sum G
-        a = tuple(lowpass_coefficient(dt, t) for t in p.tau_lateral)
-        # edge and diagonal weights of Q = w_i sum K (1 - a) X(t-1), per channel
-        self.q_weights = tuple(w * k * (1.0 - x) for w in (p.w_i_on, p.w_i_off) for k, x in zip(p.k_lateral, a))
-        self.w_on, self.w_off = p.feedback_stencils(dt)
-        start_on, start_off = p.local_start_gains(dt)
-        self.start_gains = (*start_on, *start_off)  # w, kappa of ON, then of OFF
+        self._bufs = np.zeros(4, np.int32)  # flgmd_lanes_solve's buffers (kernels.lgmd.B_ON...)
+
+    def _coefficients(self) -> dict[int, Any]:
+        return {**super()._coefficients(), **_flgmd_coefficients(self.K, self.params, self.dt)}
 
     def _reset_buffers(self) -> None:
         self.settled = [0, 0]  # buffer of the settled ON, OFF channel
@@ -465,11 +511,9 @@ class LaneTaichiFLGMDBackend(LaneTaichiLGMDBackend):
 
     def load(self, grey: np.ndarray, first: bool) -> float:
         """Photoreceptors, drives, constant inhibition and the iterate's start; returns ``sum |P|``."""
-        ws = self._acquire()
         self.iterate = [(c + 1) % 3 for c in self.settled]
         self._sum_g = None
-        return self._load(grey, first, self.settled[0], self.iterate[0], self.settled[1], self.iterate[1],
-                          (ws.on0, ws.off0, ws.q_on, ws.q_off, *self.q_weights, *self.start_gains))
+        return self._load(grey, first, self.settled[0], self.iterate[0], self.settled[1], self.iterate[1], True)
 
     def prepare(self) -> None:
         """Nothing to compute: :meth:`load` wrote ``Q`` and the iterate's start."""
@@ -489,11 +533,10 @@ class LaneTaichiFLGMDBackend(LaneTaichiLGMDBackend):
         with_off = p.beta_off != 0.0
         cur = list(self.iterate)
         other = [3 - self.settled[k] - cur[k] for k in range(2)]  # the third buffer: the iterate before
-        rec, out = self._record, self._solve_out
-        self.K.flgmd_lanes_solve(ws.on0, ws.off0, ws.on, ws.off, ws.q_on, ws.q_off, ws.S_on, ws.S_off, ws.S, ws.G,
-                                 cur[0], other[0], cur[1], other[1], *self.w_on, *self.w_off, p.beta_on,
-                                 p.beta_off, p.t_s, rec.start(coefs), len(coefs), self._tol32, RESTART_GROWTH,
-                                 self.nw, ws.sync, ws.rbuf, ws.msum, self.W, with_off, out)
+        rec, out, bufs = self._record, self._solve_out, self._bufs
+        bufs[:] = self._on(cur[0]), self._on(other[0]), self._off(cur[1]), self._off(other[1])  # B_ON, ...
+        self.K.flgmd_lanes_solve(ws.state, bufs, rec.start(coefs), len(coefs), self.coef, self.nw, self.W, with_off,
+                                 out)
         res = rec.residuals(len(coefs))
         if len(res) % 2:
             self.iterate = [other[0], other[1] if with_off else cur[1]]
@@ -505,12 +548,10 @@ class LaneTaichiFLGMDBackend(LaneTaichiLGMDBackend):
         self.settled = list(self.iterate)
         if self._sum_g is not None:
             return self._sum_g
-        ws = self._acquire()
-        p = self.params
         out = self._finish_out
         out.fill(0.0)
-        self.K.flgmd_lanes_finish(ws.on, ws.off, *self.settled, ws.q_on, ws.q_off, ws.S_on, ws.S_off,
-                                  ws.S, ws.G, *self.w_on, *self.w_off, p.t_s, self.W, out)
+        self.K.flgmd_lanes_finish(self._acquire().state, self._on(self.settled[0]), self._off(self.settled[1]),
+                                  self.coef, self.W, out)
         return float(out[0])
 
     def hold(self) -> None:
