@@ -247,3 +247,51 @@ class LPLC2Reference:
         """Step through ``frames``; one array per :class:`LPLC2Step` field (arms (T, 4), trace (T, substeps))."""
         steps = [self.step(f) for f in frames]
         return {name: np.array([getattr(s, name) for s in steps]) for name in LPLC2Step.__dataclass_fields__}
+
+
+class NumpyLPLC2Backend:
+    """The float64 backend of the engine model :class:`cdnf_ti.models.lplc2.LPLC2`: the EMD and LPLC2
+    stages of :class:`LPLC2Reference` behind the backend interface (``load``, ``pool``, ``fields``).
+
+    Parameters
+    ----------
+    params : dataclass with the fields of :class:`LPLC2Params` (the model's parameters)
+    shape : (H, W)
+    fps : float
+    """
+
+    name = "numpy"
+
+    def __init__(self, params, shape: tuple[int, int], fps: float):
+        fields = {k: getattr(params, k) for k in LPLC2Params.__dataclass_fields__}
+        self.ref = LPLC2Reference(shape[0], shape[1], fps=fps, params=LPLC2Params(**fields))
+        self.shape = (int(shape[0]), int(shape[1]))
+
+    def reset(self) -> None:
+        self.ref.reset()
+
+    def load(self, grey: np.ndarray, first: bool) -> None:
+        """Photoreceptors and EMD of one frame (only stored when ``first``)."""
+        ref = self.ref
+        lum = ref.luminance(grey)
+        if not first:
+            ref.motion_maps = ref.motion(lum)
+        ref.lum_prev = lum
+        ref.t += 1
+
+    def pool(self) -> tuple[int, float, tuple[float, float, float, float]]:
+        """``(active units, centre response, centre arms (left, right, up, down))`` of the loaded frame."""
+        ref = self.ref
+        ref.arm_maps = ref.arms(ref.motion_maps)
+        ref.lplc2 = ref.arm_maps.prod(axis=0)
+        cy, cx = max((self.shape[0] - 1) // 2 - 1, 0), max((self.shape[1] - 1) // 2 - 1, 0)
+        arms = tuple(float(a) for a in ref.arm_maps[:, cy, cx])
+        return int(np.count_nonzero(ref.lplc2 > 0)), float(ref.lplc2[cy, cx]), arms
+
+    def fields(self) -> dict[str, np.ndarray]:
+        """The maps of :class:`~cdnf_ti.backends.lplc2.TaichiLPLC2Backend`, padded to (H, W) with zeros."""
+        ref = self.ref
+        m = ref.motion_maps
+        maps = dict(horizontal=m[0] - m[1], vertical=m[2] - m[3], left=ref.arm_maps[0], right=ref.arm_maps[1],
+                    up=ref.arm_maps[2], down=ref.arm_maps[3], lplc2=ref.lplc2)
+        return {k: np.pad(v, ((0, 1), (0, 1))) for k, v in maps.items()}

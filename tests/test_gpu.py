@@ -65,7 +65,7 @@ def test_every_model_on_cuda_agrees_with_its_reference(compiler):
     if NO_GPU in proc.stdout:
         pytest.skip("no CUDA device on this machine")
     rows = [ln.split() for ln in proc.stdout.strip().splitlines()]
-    assert len(rows) == 2 * 5, proc.stdout  # two inputs x five models
+    assert len(rows) == 2 * len(MODELS), proc.stdout  # two inputs x every registered model
     for arch, comp, in_label, name, diff, converged, same_alerts in rows:
         assert (arch, comp) == ("cuda", compiler)
         assert float(diff) < 1e-4, (in_label, name, diff)

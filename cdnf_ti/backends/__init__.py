@@ -14,7 +14,7 @@ from __future__ import annotations
 from typing import Any, Callable
 
 from .. import taichi_runtime
-from . import cdnf, lgmd, sdnf
+from . import cdnf, lgmd, lplc2, sdnf
 
 #: Backend factories by model name: ``factory(model, shape, arch) -> backend``.
 FACTORIES: dict[str, Callable[[Any, tuple[int, int], str], Any]] = {}
@@ -59,3 +59,4 @@ register_backend("cdnf", cdnf.make_backend)
 register_backend("sdnf", sdnf.make_backend)
 for _name in lgmd.FAMILY:
     register_backend(_name, lgmd.make_backend)
+register_backend("lplc2", lplc2.make_backend)

@@ -16,8 +16,10 @@ from .sdnf import SDNF, SDNFParams
 from .lgmd2 import LGMD2, LGMD2Params
 from .lgmd1 import LGMD1, LGMD1Params
 from .flgmd import FLGMDONn, FLGMDParams
+from .lplc2 import LPLC2, LPLC2Params
 # isort: on
 
 __all__ = ["MODELS", "Model", "ModelBackend", "Sweepable", "StepResult", "Trace", "NotConvergedWarning", "CDNF",
            "register_model", "get_model_class", "create_model",
-           "LGMD2", "LGMD2Params", "LGMD1", "LGMD1Params", "SDNF", "SDNFParams", "FLGMDONn", "FLGMDParams"]
+           "LGMD2", "LGMD2Params", "LGMD1", "LGMD1Params", "SDNF", "SDNFParams", "FLGMDONn", "FLGMDParams",
+           "LPLC2", "LPLC2Params"]

@@ -1,4 +1,5 @@
-"""Oracle check of :mod:`cdnf_ti.lplc2_reference` against the authors' MATLAB, run by GNU Octave.
+"""Oracle check of :mod:`cdnf_ti.lplc2_reference` (and, with ``--engine``, of the engine model
+:class:`cdnf_ti.models.lplc2.LPLC2`) against the authors' MATLAB, run by GNU Octave.
 
 Uses the user's own checkout of ``zhaojunyu01/EMD-LPLC2-GF-model`` (not part
 of cdnf_ti): their functions ``emd.m``, ``OnRect.m``, ``OffRect.m``,
@@ -17,10 +18,15 @@ unit, of the GF input current and of the GF membrane samples; the number of
 frames whose active-unit count differs; and whether the GF spike frames (the
 alert) are equal.
 
+With ``--engine`` a second table compares the engine model (its compiled backend, the
+compiler of ``$CDNF_TI_COMPILER``) with the same Octave run: the LPLC2 response maps
+(relative to the frame's largest), the centre unit, the GF input, the membrane at each
+frame's end, the frames whose active-unit count differs and the spike frames.
+
 Usage::
 
     python docs/figures/compare_lplc2_octave.py --repo PATH/EMD-LPLC2-GF-model \\
-        [--stimuli Looming_50ms ...] [--first 195] [--frames 105] [--step 4] [--source mat|avi]
+        [--stimuli Looming_50ms ...] [--first 195] [--frames 105] [--step 4] [--source mat|avi] [--engine]
 
 Their ``emd.m`` loops over pixels: about 6 s per 150x200 frame under Octave.
 """
@@ -123,8 +129,41 @@ def run_octave(octave: str, repo: Path, patt: np.ndarray, work: Path) -> dict:
     return sio.loadmat(out)
 
 
-def compare(octave: str, repo: Path, patt: np.ndarray) -> dict:
-    """Largest differences between their MATLAB (under Octave) and the reference on ``patt``."""
+def compare_engine(theirs: dict, patt: np.ndarray) -> dict:
+    """Largest differences between their MATLAB run ``theirs`` and the engine model on ``patt``."""
+    from cdnf_ti.models import LPLC2
+
+    h, w, t = patt.shape
+    model = LPLC2(fps=1.0 / AUTHORS_DT)
+    maps_t = theirs["maps"].reshape(h - 1, w - 1, t - 1)
+    v_t = theirs["v"].ravel()[1:].reshape(t - 1, -1)
+    map_rel = core = current = v_end = 0.0
+    count_diff = 0
+    spikes_o = []
+    for k in range(t):
+        s = model.step(patt[:, :, k].astype(np.float32))
+        if k == 0:
+            continue
+        m_t = maps_t[:, :, k - 1]
+        ours = model.fields()["lplc2"][: h - 1, : w - 1]
+        map_rel = max(map_rel, float(np.max(np.abs(ours - m_t))) / max(float(np.max(np.abs(m_t))), 1e-300))
+        core = max(core, abs(s.diagnostics["core"] - float(theirs["core"].ravel()[k - 1])))
+        current = max(current, abs(s.diagnostics["current"] - float(theirs["I"].ravel()[k - 1])))
+        end = v_t[k - 1, -1]
+        v_end = max(v_end, abs(s.output - (model.params.v_reset if end == 20.0 else end)))
+        count_diff += int(s.diagnostics["active"] != int(theirs["nums"].ravel()[k - 1]))
+        spikes_o.append(s.spike)
+    spikes_t = (v_t == 20.0).any(axis=1)
+    first_t = int(np.argmax(spikes_t)) + 1 if spikes_t.any() else None
+    first_o = int(np.argmax(spikes_o)) + 1 if any(spikes_o) else None
+    return {"map_rel": map_rel, "core": core, "current": current, "v": v_end, "count_diff": count_diff,
+            "spike_frames": int(spikes_t.sum()), "spikes_equal": bool(np.array_equal(spikes_t, np.array(spikes_o))),
+            "first": (first_t, first_o)}
+
+
+def compare(octave: str, repo: Path, patt: np.ndarray, engine: bool = False) -> dict:
+    """Largest differences between their MATLAB (under Octave) and the reference on ``patt`` (and, with
+    ``engine``, the engine model's under the key ``"engine"``)."""
     with tempfile.TemporaryDirectory() as tmp:
         theirs = run_octave(octave, repo, patt, Path(tmp))
     h, w, t = patt.shape
@@ -154,10 +193,13 @@ def compare(octave: str, repo: Path, patt: np.ndarray) -> dict:
     spikes_t = (v_t.reshape(t - 1, -1) == 20.0).any(axis=1)
     first_t = int(np.argmax(spikes_t)) + 1 if spikes_t.any() else None
     first_o = int(np.argmax(spikes_o)) + 1 if any(spikes_o) else None
-    return {"motion_rel": motion_rel, "map_abs": map_abs, "map_rel": map_rel, "core": core, "current": current,
-            "v": float(np.max(np.abs(np.array(ours_trace) - v_t))), "count_diff": count_diff,
-            "active_max": int(theirs["nums"].max()), "spike_frames": int(spikes_t.sum()),
-            "spikes_equal": bool(np.array_equal(spikes_t, np.array(spikes_o))), "first": (first_t, first_o)}
+    out = {"motion_rel": motion_rel, "map_abs": map_abs, "map_rel": map_rel, "core": core, "current": current,
+           "v": float(np.max(np.abs(np.array(ours_trace) - v_t))), "count_diff": count_diff,
+           "active_max": int(theirs["nums"].max()), "spike_frames": int(spikes_t.sum()),
+           "spikes_equal": bool(np.array_equal(spikes_t, np.array(spikes_o))), "first": (first_t, first_o)}
+    if engine:
+        out["engine"] = compare_engine(theirs, patt)
+    return out
 
 
 def main(argv=None) -> int:
@@ -169,6 +211,7 @@ def main(argv=None) -> int:
     ap.add_argument("--step", type=int, default=4, help="spatial downsampling (their loom.m: 4)")
     ap.add_argument("--first", type=int, default=195, help="first frame (0-based; their motion starts at 200)")
     ap.add_argument("--frames", type=int, default=105)
+    ap.add_argument("--engine", action="store_true", help="also compare the engine model (a second table)")
     args = ap.parse_args(argv)
     if shutil.which(args.octave) is None:
         sys.exit(f"error: {args.octave}: not found (install GNU Octave)")
@@ -177,14 +220,28 @@ def main(argv=None) -> int:
     print(f"{'stimulus':28s} {'size':>8s} {'T':>4s} {'rel dEMD':>9s} {'max|dMap|':>9s} {'rel':>9s} {'max|dCore|':>10s} "
           f"{'max|dI|':>9s} {'max|dV|mV':>9s} {'#active!=':>9s} {'max act':>7s} {'spk frames':>10s} spikes equal"
           " (first spike frame theirs/ours)")
+    engine_rows = []
     for name in args.stimuli:
         patt = load_stimulus(args.repo, name, args.source, args.step, args.first, args.frames)
-        r = compare(args.octave, args.repo, patt)
+        r = compare(args.octave, args.repo, patt, args.engine)
         h, w, t = patt.shape
         print(f"{name:28s} {f'{w}x{h}':>8s} {t:4d} {r['motion_rel']:9.2e} {r['map_abs']:9.2e} {r['map_rel']:9.2e} "
               f"{r['core']:10.2e} "
               f"{r['current']:9.2e} {r['v']:9.2e} {r['count_diff']:9d} {r['active_max']:7d} {r['spike_frames']:10d} "
               f"{'yes' if r['spikes_equal'] else 'NO'} ({r['first'][0]}/{r['first'][1]})", flush=True)
+        if args.engine:
+            e = r["engine"]
+            engine_rows.append(f"{name:28s} {f'{w}x{h}':>8s} {t:4d} {e['map_rel']:9.2e} {e['core']:10.2e} "
+                               f"{e['current']:9.2e} {e['v']:9.2e} {e['count_diff']:9d} {e['spike_frames']:10d} "
+                               f"{'yes' if e['spikes_equal'] else 'NO'} ({e['first'][0]}/{e['first'][1]})")
+            print("engine: " + engine_rows[-1], file=sys.stderr, flush=True)  # as it comes (the table at the end)
+    if args.engine:
+        from cdnf_ti.taichi_runtime import current_compiler
+
+        print(f"\nengine model (compiler {current_compiler()}) against the same Octave runs:")
+        print(f"{'stimulus':28s} {'size':>8s} {'T':>4s} {'rel dMap':>9s} {'max|dCore|':>10s} {'max|dI|':>9s} "
+              f"{'|dV| end':>9s} {'#active!=':>9s} {'spk frames':>10s} spikes equal (first spike frame theirs/ours)")
+        print("\n".join(engine_rows))
     return 0
 
 

@@ -1,0 +1,205 @@
+"""EMD-LPLC2-GF: a fly-inspired looming detector (Zhao, Xi, Li, Guo, Wu et al., iScience 26(4):106337, 2023).
+
+Equations as the authors' MATLAB computes them (``zhaojunyu01/EMD-LPLC2-GF-model``, ``code/2_...``:
+``emd.m``, ``OnRect.m``, ``OffRect.m``, ``lplc2conv2.m``, ``GF.m``, ``LIF.m``; docs/MODELS.md). Per frame
+``t`` (luminance ``L`` in [0, 1], ``dt = 1 / fps`` s; theirs is 10 ms):
+
+* photoreceptor high-pass ``F_h = b (L(t) - L(t-1)) + b F_h(t-1)``, ``b = d / (d + 1)``, ``d = tau_h / dt``;
+* ``ON = [F_h]^+``, ``OFF = [0.05 - F_h]^+``; delay ``F_d = a X + (1 - a) F_d(t-1)``, ``a = 1 / (tau_l / dt + 1)``;
+* Hassenstein-Reichardt detectors between neighbours (ON and OFF summed) on the (H-1, W-1) grid;
+* one LPLC2 unit per grid point with four radial-opponent half-plane arms (outward motion minus inward,
+  a 40 x 50 px half of a 100 px receptive field each), each kept where ``> 2``; the unit's response is the
+  product of its four arms (so it needs outward motion on all four sides: expansion);
+* giant fibre: ``n`` = active units / 2500, ``v = (n(t) - n(t-1)) / 0.576``, input ``I = 250 n v``
+  (0 while ``n(t-1) = 0``); LIF ``0.3 dV/dt = -V - 60 + 10 I`` in 20 RK4 substeps per frame, held at
+  -80 mV at or below it; a substep above -50 mV is a spike and resets V to -70 mV.
+
+The per-pixel stages run on the engine (:mod:`cdnf_ti.kernels.lplc2`); the giant fibre is here. The
+float64 oracle (shares no code with the engine): :class:`cdnf_ti.lplc2_reference.LPLC2Reference`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from ..lplc2_reference import NumpyLPLC2Backend
+from ..params import ModelParams, check_params
+from .base import Model, StepResult, Trace
+from .registry import register_model
+
+
+@dataclass(frozen=True)
+class LPLC2Params(ModelParams):
+    """EMD-LPLC2-GF parameters (defaults: the authors' MATLAB; times in s, potentials in mV).
+
+    Attributes
+    ----------
+    tau_h, tau_l : float
+        High-pass (0.25 s) and delay low-pass (0.05 s) time constants.
+    on_threshold, off_threshold : float
+        ``ON = [F_h - on_threshold]^+`` (0), ``OFF = [off_threshold - F_h]^+`` (0.05).
+    half_side : int
+        Half side of an LPLC2 receptive field (px, 50): an arm reaches this far out from its unit.
+    band_before, band_after : int
+        An arm spans the centre - band_before .. centre + band_after across its direction (19, 20 px).
+    arm_threshold : float
+        An arm counts only where above this (2.0).
+    normal_count, normal_velocity : float
+        ``n`` = active units / normal_count (2500); ``v = (n(t) - n(t-1)) / normal_velocity`` (0.576).
+    w : float
+        Giant-fibre input gain (250).
+    v_rest, v_threshold, v_reset, v_floor, v_spike : float
+        LIF rest (-60), spike threshold (-50), reset (-70), floor (-80), value recorded for a spike (20).
+    resistance, tau_m : float
+        Membrane resistance (10) and time constant (0.3 s).
+    substeps : int
+        RK4 substeps per frame (20).
+    """
+
+    tau_h: float = 0.250
+    tau_l: float = 0.050
+    on_threshold: float = 0.0
+    off_threshold: float = 0.05
+    half_side: int = 50
+    band_before: int = 19
+    band_after: int = 20
+    arm_threshold: float = 2.0
+    normal_count: float = 2500.0
+    normal_velocity: float = (2116.0 - 676.0) / 2500.0
+    w: float = 250.0
+    v_rest: float = -60.0
+    v_threshold: float = -50.0
+    v_reset: float = -70.0
+    v_floor: float = -80.0
+    v_spike: float = 20.0
+    resistance: float = 10.0
+    tau_m: float = 0.30
+    substeps: int = 20
+
+    def __post_init__(self) -> None:
+        check_params("LPLC2Params", [
+            (self.tau_h > 0 and self.tau_l > 0, f"tau_h and tau_l must be > 0 s, got {self.tau_h}, {self.tau_l}"),
+            (int(self.half_side) == self.half_side and self.half_side >= 1,
+             f"half_side must be a positive integer, got {self.half_side}"),
+            (all(int(b) == b and b >= 0 for b in (self.band_before, self.band_after)),
+             "band_before and band_after must be integers >= 0"),
+            (self.normal_count > 0 and self.normal_velocity > 0, "normal_count and normal_velocity must be > 0"),
+            (self.tau_m > 0, f"tau_m must be > 0 s, got {self.tau_m}"),
+            (self.v_floor < self.v_reset < self.v_threshold, "need v_floor < v_reset < v_threshold"),
+            (int(self.substeps) == self.substeps and self.substeps >= 1,
+             f"substeps must be a positive integer, got {self.substeps}"),
+        ])
+
+
+@register_model
+class LPLC2(Model):
+    """EMD-LPLC2 array with a giant-fibre LIF output (Zhao et al. 2023).
+
+    Parameters
+    ----------
+    params : LPLC2Params, optional
+    backend : {"taichi", "numpy"}
+    arch : str
+    fps : float
+        Input frame rate; ``dt = 1 / fps`` s (the authors' stimuli: 100 frames/s).
+
+    Notes
+    -----
+    ``output`` is the giant-fibre membrane ``V`` (mV) at the end of the frame; ``spike`` the alert (a GF
+    spike in one of the frame's substeps). Diagnostics: ``spikes`` (in the frame), ``active`` (LPLC2
+    units responding), ``current`` (GF input), ``core`` (the centre unit's response) and its four arms
+    ``arm_left``, ``arm_right``, ``arm_up``, ``arm_down`` (the per-direction activity), ``dt`` (s, for
+    the threshold sweep's replay of the GF). :meth:`fields`:
+    ``horizontal``, ``vertical`` (opponent motion), ``left``, ``right``, ``up``, ``down`` (thresholded
+    arms), ``lplc2`` (responses), on the (H-1, W-1) unit grid padded to (H, W) with zeros.
+    Frame 0 only stores the picture (membrane at rest). The model has no ``threshold`` on its output:
+    a substep above ``v_threshold`` spikes and resets, so the frame-end ``V`` never exceeds it.
+    """
+
+    name = "lplc2"
+    output_name = "V"
+    params_type = LPLC2Params
+    description = "EMD-LPLC2 array with a giant-fibre LIF (Zhao et al. 2023); equations from the authors' MATLAB"
+
+    #: Threshold sweep (:class:`~cdnf_ti.models.base.Sweepable`): the GF spike threshold.
+    sweep_parameter = "v_threshold (GF spike threshold, mV)"
+    sweep_values = tuple(float(v) for v in range(-58, -39))
+
+    @classmethod
+    def sweep_default(cls) -> float:
+        return float(cls.params_type().v_threshold)
+
+    @classmethod
+    def sweep_alerts(cls, trace: Trace, values: Sequence[float]) -> list[np.ndarray]:
+        """Alerts per frame at each spike threshold: the GF replayed on the saved input ``current`` and
+        frame interval ``dt`` (the LPLC2 array does not depend on the threshold), the other GF
+        parameters at their defaults."""
+        current, dt = trace.diagnostics["current"], trace.diagnostics["dt"]
+        out = []
+        for value in values:
+            p = cls.params_type(v_threshold=float(value))
+            v, alerts = p.v_rest, np.zeros(trace.n_frames, bool)
+            for t in range(1, trace.n_frames):  # frame 0 only stores the picture
+                v, spikes = gf_frame(v, float(current[t]), float(dt[t]), p)
+                alerts[t] = spikes > 0
+            out.append(alerts)
+        return out
+
+    def _numpy_backend(self, shape: tuple[int, int]) -> NumpyLPLC2Backend:
+        return NumpyLPLC2Backend(self.params, shape, self.fps)
+
+    def _reset_state(self) -> None:
+        self.v = self.params.v_rest
+        self.active_prev: int | None = None
+
+    def _step(self, t: int, grey: np.ndarray, loaded: None) -> StepResult:
+        if t == 0:
+            return StepResult(t, self.v, False, True, self._diagnostics(0, 0, 0.0, 0.0, (0.0,) * 4))
+        active, core, arms = self._be.pool()
+        current = self._gf_input(active)
+        self.active_prev = active
+        self.v, spikes = gf_frame(self.v, current, 1.0 / self.fps, self.params)
+        return StepResult(t, self.v, spikes > 0, True, self._diagnostics(spikes, active, current, core, arms))
+
+    def _gf_input(self, active: int) -> float:
+        """``I = w n(t) v(t)``, ``v = (n(t) - n(t-1)) / normal_velocity``; 0 while ``n(t-1) = 0`` (or unknown)."""
+        p = self.params
+        n = active / p.normal_count
+        n_prev = n if self.active_prev is None else self.active_prev / p.normal_count
+        return 0.0 if n_prev == 0 else p.w * n * (n - n_prev) / p.normal_velocity
+
+    def _diagnostics(self, spikes: int, active: int, current: float, core: float, arms: tuple) -> dict[str, float]:
+        left, right, up, down = arms
+        return dict(spikes=spikes, active=active, current=current, core=core, arm_left=left, arm_right=right,
+                    arm_up=up, arm_down=down, dt=1.0 / self.fps)
+
+
+def gf_frame(v: float, current: float, dt: float, p: LPLC2Params) -> tuple[float, int]:
+    """One frame of the giant fibre from membrane ``v`` (mV) with input ``current`` over ``dt`` s:
+    ``substeps`` RK4 steps, a step ending above ``v_threshold`` spikes and resets. ``(V at the end, spikes)``."""
+    h = dt / p.substeps
+    spikes = 0
+    for _ in range(p.substeps):
+        v = lif_substep(v, current, h, p)
+        if v > p.v_threshold:
+            spikes += 1
+            v = p.v_reset
+    return v, spikes
+
+
+def lif_substep(v: float, current: float, h: float, p: LPLC2Params) -> float:
+    """One RK4 step of length ``h`` (s) of ``tau_m dV/dt = -V + v_rest + R I``; V at or below the floor stays."""
+    if v <= p.v_floor:
+        return p.v_floor
+    drive = p.v_rest + p.resistance * current
+
+    def slope(y: float) -> float:
+        return (drive - y) / p.tau_m
+
+    k1 = slope(v)
+    k2 = slope(v + k1 * h / 2)
+    k3 = slope(v + k2 * h / 2)
+    k4 = slope(v + k3 * h)
+    return v + (k1 + 2 * k2 + 2 * k3 + k4) * h / 6
