@@ -25,6 +25,7 @@ BROKEN = {
     "any": {("taichi", "1.7."), ("quadrants", "1.3.")},
     "negate": {("taichi", "1.7."), ("quadrants", "1.3.")},
     "abs": {("taichi", "1.7."), ("quadrants", "1.3.")},
+    "subtract_assign": {("taichi", "1.7."), ("quadrants", "1.3.")},
     "gpu_probe": {("taichi", "1.7.")},
 }
 
@@ -98,6 +99,27 @@ def test_abs_compiles_on_an_explicit_vector():
     # kernels/compat.py lane_abs stands in for it
     code = _UNARY.format(compiler=COMPILER, expr="ti.abs(x[i])", want="np.abs(a)")
     assert _result(_child(code)) == "True"
+
+
+_SUBTRACT_ASSIGN = _HEAD + """
+@ti.kernel
+def k(x: ti.types.ndarray(dtype=V, ndim=1), y: ti.types.ndarray(dtype=V, ndim=1)):
+    for i in range(x.shape[0]):
+        acc = x[i] * 2.0
+        acc -= x[i]
+        y[i] = acc
+x, y = ti.ndarray(V, 4), ti.ndarray(V, 4)
+a = np.linspace(-3, 3, 128).astype(np.float32).reshape(4, 32)
+x.from_numpy(a)
+k(x, y)
+print("RESULT", bool(np.array_equal(y.to_numpy(), a)))
+"""
+
+
+@broken("subtract_assign")
+def test_subtract_assign_compiles_on_an_explicit_vector():
+    # kernels/pooling.py writes `acc = acc - x` (the compilers emit an integer subtraction and abort)
+    assert _result(_child(_SUBTRACT_ASSIGN.format(compiler=COMPILER))) == "True"
 
 
 _GPU_INIT = """
