@@ -114,24 +114,35 @@ class _NumpyLGMDBase:
         z = lambda: np.zeros(self.shape)  # noqa: E731
         self.L, self.P = z(), z()
         self.ON, self.OFF, self.ON_prev, self.OFF_prev = z(), z(), z(), z()
+        self.drive = (self.P, self.P)  # what the ON and the OFF half-wave take: P (frames) or (P_on, -P_off)
 
     def load(self, grey: np.ndarray, first: bool) -> float:
         """``P = L(t) - L(t-1)`` in grey levels (0 on the first frame); returns ``sum |P|``."""
         g = grey_levels(grey)
         self.P = np.zeros(self.shape) if first else g - self.L
         self.L = g
+        self.drive = (self.P, self.P)
         return float(np.abs(self.P).sum())
 
     def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> float:
-        """Take an event bin: ``P = 255 (p_on - p_off)`` grey levels (H, W each, in [0, 1]), the
-        net change in the bin; returns ``sum |P|``."""
-        self.P = 255.0 * (np.asarray(p_on, np.float64) - np.asarray(p_off, np.float64))
-        return float(np.abs(self.P).sum())
+        """Take an event bin (H, W each, contrast in [0, 1]): the ON channel is driven by
+        ``P_on = 255 p_on``, the OFF channel by ``P_off = 255 p_off`` grey levels, through the
+        half-waves of a frame (``half_wave_on(P_on)``, ``half_wave_off(-P_off)``); ``P = P_on - P_off``.
+        Returns ``sum (P_on + P_off)`` (a frame's ``sum |P|``: its ``P_on = [P]+``, ``P_off = [-P]+``)."""
+        p_on = 255.0 * np.asarray(p_on, np.float64)
+        p_off = 255.0 * np.asarray(p_off, np.float64)
+        self.P = p_on - p_off
+        self.drive = (p_on, -p_off)
+        return float((p_on + p_off).sum())
+
+    def _half_waves(self, on_prev: np.ndarray, off_prev: np.ndarray, clip: float,
+                    dc: float) -> tuple[np.ndarray, np.ndarray]:
+        """This step's ON and OFF channels from the loaded drive (:attr:`drive`) and the previous ones."""
+        return half_wave_on(self.drive[0], on_prev, clip, dc), half_wave_off(self.drive[1], off_prev, clip, dc)
 
     def _on_off(self, clip: float, dc: float) -> None:
         self.ON_prev, self.OFF_prev = self.ON, self.OFF
-        self.ON = half_wave_on(self.P, self.ON_prev, clip, dc)
-        self.OFF = half_wave_off(self.P, self.OFF_prev, clip, dc)
+        self.ON, self.OFF = self._half_waves(self.ON_prev, self.OFF_prev, clip, dc)
 
 
 class NumpyLGMD2Backend(_NumpyLGMDBase):
@@ -234,8 +245,7 @@ class NumpyFLGMDBackend(_NumpyLGMDBase):
         """
         p = self.params
         self.ON_prev, self.OFF_prev = self.ON, self.OFF
-        self.ON0 = half_wave_on(self.P, self.ON_prev, p.clip, p.dc)
-        self.OFF0 = half_wave_off(self.P, self.OFF_prev, p.clip, p.dc)
+        self.ON0, self.OFF0 = self._half_waves(self.ON_prev, self.OFF_prev, p.clip, p.dc)
         starts = []
         for x0, x_prev, w_i, (w, kappa) in zip((self.ON0, self.OFF0), (self.ON_prev, self.OFF_prev),
                                                (p.w_i_on, p.w_i_off), self.start_gains):

@@ -17,9 +17,11 @@ lane_abs      ``ti.abs(x)``, ``-x`` on a lane vector                   the compi
 run_max       a chain ``max(max(v0, v1), v2)...``                      speed: a tree vectorises
 ============  =======================================================  ==========================
 
-A stencil's small coefficient sets travel into the lane kernels as tuples of scalars
-(template arguments), not as small ``ti.Vector`` values: with explicit vector types a launch
-of quadrants 1.3.3 crashed on those (``kernels/lgmd.py``).
+A stencil's small coefficient sets reach the shared equations of the lane kernels as scalars
+(read from the backend's coefficient array into locals), not as small ``ti.Vector`` values:
+with explicit vector types a launch of quadrants 1.3.3 crashed on those (``kernels/lgmd.py``).
+Nor do a launch's buffer indices travel as an int ``ti.Vector``: taichi 1.7.4 crashed
+(segmentation fault) on one in an explicit-vector launch (F-LGMD's solve takes an int32 array).
 """
 
 import functools

@@ -119,6 +119,15 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
 
     @ti.func
+    def half_wave_on_off(p_on, p_off, on_prev, off_prev, clip, dc):
+        """ON/OFF channels driven separately (an event bin: ``P_on``, ``P_off >= 0``): :func:`half_wave`
+        with ``P = P_on`` for ON and ``P = -P_off`` for OFF, ``ON = P_on [P_on >= clip] + dc ON(t-1)``,
+        ``OFF = P_off [-P_off < clip] + dc OFF(t-1)``. A frame's ``P`` is ``P_on = [P]+``, ``P_off = [-P]+``."""
+        return (ti.select(p_on >= clip, p_on, 0.0) + dc * on_prev,
+                ti.select(0.0 - p_off < clip, p_off, 0.0) + dc * off_prev)
+
+
+    @ti.func
     def coef3(coef: ti.template(), k: ti.template()):
         """``coef[k], coef[k + 1], coef[k + 2]`` (a centre, edge, diagonal triple) as a vector."""
         return ti.Vector([coef[k], coef[k + 1], coef[k + 2]])
@@ -242,10 +251,28 @@ def build(ti, lanes: int) -> SimpleNamespace:
         return run_sum(ti.abs(p), n)
 
 
+    @ti.func
+    def _load_bin_run(ctx: ti.template(), im, i, ip, jm, j, jp, n: ti.template()):
+        frame, st = ti.static(ctx.frame, ctx.st)
+        b, s = ctx.b, ctx.s
+        p_on = run_get(frame, 0, i, j, n) * s[0]
+        p_off = run_get(frame, 1, i, j, n) * s[0]
+        run_put(st, P_, i, j, p_on - p_off, n)
+        a, c = half_wave_on_off(p_on, p_off, run_get(st, b[0], i, j, n), run_get(st, b[1], i, j, n), s[2], s[3])
+        run_put(st, b[2], i, j, a, n)
+        run_put(st, b[3], i, j, c, n)
+        return run_sum(p_on + p_off, n)
+
+
     @ti.kernel
-    def load_frame(frame: ti.types.ndarray(ndim=2), st: F3, on_src: ti.i32, off_src: ti.i32, on_dst: ti.i32,
+    def load_frame(frame: ti.types.ndarray(), st: F3, on_src: ti.i32, off_src: ti.i32, on_dst: ti.i32,
                    off_dst: ti.i32, scale: ti.f32, first: ti.i32, coef: F1, blocks: ti.i32, out: D1):
         """Photoreceptors and the ON/OFF channels of one frame; adds ``sum |P|`` to ``out[0]`` (set to 0 by the caller).
+
+        An event bin instead of a frame: ``frame`` of shape (2, H, W), its ``p_on`` and ``p_off``
+        (float32, contrast in [0, 1]); the ON channel is driven by ``P_on = scale p_on``, the OFF
+        channel by ``P_off = scale p_off`` (:func:`half_wave_on_off`), ``P = P_on - P_off``, ``L``
+        stays; adds ``sum (P_on + P_off)`` to ``out[0]``.
 
         ``g = floor(frame * scale + 0.5)`` (integer grey levels); ``P = g - L`` (0 when
         ``first``); ``L = g``; ``ON = P [P >= clip] + dc ON(t-1)``,
@@ -264,7 +291,10 @@ def build(ti, lanes: int) -> SimpleNamespace:
         for k in range(H * blocks):
             i, j0, j1 = block_span(k, W, blocks)
             ctx = ti.static(LoadRunCtx(frame, st, b, s))
-            ti.atomic_add(out[0], row_runs(_load_run, ctx, i, j0, j1, H, W, "sum", 1))
+            if ti.static(len(frame.shape) == 3):  # an event bin
+                ti.atomic_add(out[0], row_runs(_load_bin_run, ctx, i, j0, j1, H, W, "sum", 1))
+            else:
+                ti.atomic_add(out[0], row_runs(_load_run, ctx, i, j0, j1, H, W, "sum", 1))
 
 
     #: ``b``: the ON channel's buffers now and the frame before (OFF's: ``+ PING_PONG``); ``w``: ``(w_on, w_off)``.
@@ -569,10 +599,20 @@ def build(ti, lanes: int) -> SimpleNamespace:
         return ti.floor(g * scale + 0.5)
 
 
+    @ti.func
+    def _lane_bin(frame: ti.template(), k, i, e, scale, W: ti.template()):
+        """``scale`` times polarity ``k`` of an event bin (``frame``: (2, H, W)) on element ``(i, e)``
+        (columns past W-1 repeat it)."""
+        g = ti.Vector([0.0] * LANES, dt=ti.f32)
+        for l in ti.static(range(LANES)):
+            g[l] = ti.cast(frame[k, i, ti.min((e - 1) * LANES + l, W - 1)], ti.f32)
+        return g * scale
+
+
     @vector_kernel
     @ti.kernel
     def lgmd_lanes_load(
-        frame: ti.types.ndarray(ndim=2), st: LANE3, c_on: ti.i32, s_on: ti.i32, c_off: ti.i32, s_off: ti.i32,
+        frame: ti.types.ndarray(), st: LANE3, c_on: ti.i32, s_on: ti.i32, c_off: ti.i32, s_off: ti.i32,
         scale: ti.f32, first: ti.i32, coef: F1, W: ti.template(), feedback: ti.template(), out: D1,
     ):
         """:func:`load_frame` on lane fields: photoreceptors ``L``/``P`` and the ON/OFF channels,
@@ -583,6 +623,8 @@ def build(ti, lanes: int) -> SimpleNamespace:
         ``on0``/``off0``, ``Q = w_i sum K (1 - a) X(t-1)`` of the settled channels
         ``st[c_on]``/``st[c_off]`` (``coef[QN1:QN2 + 1]``/``coef[QF1:QF2 + 1]``: edge and diagonal
         weights of ON and OFF) and the iterate's start ``st[s_on]``/``st[s_off]`` (:func:`feedback_start`).
+
+        An event bin (``frame`` of shape (2, H, W)) drives the channels as in :func:`load_frame`.
         """
         H = st.shape[1]
         E1 = ti.static((LANES + W - 1) // LANES)
@@ -596,11 +638,22 @@ def build(ti, lanes: int) -> SimpleNamespace:
             ip = ti.min(i + 1, H - 1)
             acc = ti.f64(0.0)
             for e in range(e0, e1):
-                g = _lane_grey(frame, i, e, scale, W)
-                p = keep * (g - st[L_, i, e])
-                st[L_, i, e] = g
-                st[P_, i, e] = p
-                a, b = half_wave(p, st[c_on, i, e], st[c_off, i, e], clip, dc)
+                a = ti.Vector([0.0] * LANES, dt=ti.f32)  # the channels' new values, set by the input stage
+                b = ti.Vector([0.0] * LANES, dt=ti.f32)
+                drive = ti.Vector([0.0] * LANES, dt=ti.f32)  # |P| (frames) or P_on + P_off (event bins)
+                if ti.static(len(frame.shape) == 3):  # an event bin
+                    p_on = _lane_bin(frame, 0, i, e, scale, W)
+                    p_off = _lane_bin(frame, 1, i, e, scale, W)
+                    st[P_, i, e] = p_on - p_off
+                    a, b = half_wave_on_off(p_on, p_off, st[c_on, i, e], st[c_off, i, e], clip, dc)
+                    drive = p_on + p_off
+                else:
+                    g = _lane_grey(frame, i, e, scale, W)
+                    p = keep * (g - st[L_, i, e])
+                    st[L_, i, e] = g
+                    st[P_, i, e] = p
+                    a, b = half_wave(p, st[c_on, i, e], st[c_off, i, e], clip, dc)
+                    drive = lane_abs(p)
                 if ti.static(feedback):
                     st[ON0_, i, e] = a
                     st[OFF0_, i, e] = b
@@ -614,7 +667,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
                     b = feedback_start(b, qf, wf, kf)
                 st[s_on, i, e] = a
                 st[s_off, i, e] = b
-                acc += ti.cast((lane_abs(p) * lane_mask(e, W)).sum(), ti.f64)
+                acc += ti.cast((drive * lane_mask(e, W)).sum(), ti.f64)
             fill_ghosts(st, s_on, i, e0 == 1, e1 == E1 + 1, W, 1, REPLICATE)
             fill_ghosts(st, s_off, i, e0 == 1, e1 == E1 + 1, W, 1, REPLICATE)
             ti.atomic_add(out[0], acc)

@@ -49,3 +49,26 @@ def test_event_input_equals_the_frames_on_off_split(stimulus, emulator, threshol
         p_on, p_off = contrast_input(bins[k], threshold) if k < len(bins) else (0 * on, 0 * off)
         np.testing.assert_array_equal(p_on, on, err_msg=f"ON, bin {k}")
         np.testing.assert_array_equal(p_off, off, err_msg=f"OFF, bin {k}")
+
+
+@pytest.mark.parametrize("name", ["lgmd1", "lgmd2", "flgmd_onn"])
+@pytest.mark.parametrize("backend", ["numpy", "taichi"])
+def test_the_lgmd_family_sees_on_events_what_it_sees_on_frames(name, backend):
+    # an event bin drives the ON/OFF channels with 255 p_on, 255 p_off: on a full-contrast stimulus that
+    # is the frames' [P]+, [-P]+ in grey levels, so the step of bin k equals the step of frame k + 1
+    from cdnf_ti.models import create_model
+
+    src = resolve_input(f"stim:dark_looming?size={SIZE}")
+    frames = list(iter_grey(src))
+    events = list(emulate(frames, src.fps, EmulatorParams(0.2, 0.2)))
+    bins = list(bin_events(events, (SIZE, SIZE), t0=0))
+    k = next(i for i, b in enumerate(bins) if b.sum() > 0)  # the first change: frame k to frame k + 1
+    on_frames = create_model(name, backend=backend)
+    trace = on_frames.run(frames[k:k + 2])
+    on_events = create_model(name, backend=backend)
+    step = on_events.step_on_off(*contrast_input(bins[k], 0.2))
+    assert step.output == trace.output[1]
+    fa, fb = on_events.fields(), on_frames.fields()
+    assert set(fa) == set(fb) and fb["OFF"].max() == 255.0  # the dark square's edge moved
+    for f in fb:
+        np.testing.assert_array_equal(fa[f], fb[f], err_msg=f)

@@ -144,3 +144,75 @@ def test_cdnf_keeps_its_table_i_row_on_event_recordings_through_the_cli(recordin
             assert n_bins == n_frames[name] - 1
         alerted = any(r["spike"] == "1" for r in rows)
         assert alerted == (TABLE1["cdnf"][name] == 1), name
+
+
+# -- the LGMD family: an event bin drives the ON and the OFF channel separately ---------------------
+LGMD_FAMILY = ["lgmd1", "lgmd2", "flgmd_onn"]
+
+
+def lgmd_channel_drives(model) -> tuple[np.ndarray, np.ndarray]:
+    """The ON and OFF channels that a reference LGMD-family backend computed from its last input
+    (F-LGMD: its feed-forward drives ``ON0``/``OFF0``, before the feedback)."""
+    be = model._be
+    return (be.ON0, be.OFF0) if model.name == "flgmd_onn" else (be.ON, be.OFF)
+
+
+@pytest.mark.parametrize("name", LGMD_FAMILY)
+def test_a_pixel_with_both_polarities_drives_both_lgmd_channels(name):
+    on, off = np.zeros((24, 24)), np.zeros((24, 24))
+    on[5, 5], off[5, 5] = 0.4, 0.2  # both polarities, ON stronger
+    on[12, 7], off[12, 7] = 0.2, 0.6  # both, OFF stronger
+    on[3, 18], off[20, 2] = 0.2, 0.4  # one each
+    both = (on > 0) & (off > 0)
+    model = create_model(name, backend="numpy")
+    model.step_on_off(on, off)
+    on_channel, off_channel = lgmd_channel_drives(model)
+    # ON = P_on [P_on >= clip] + dc ON(t-1), OFF = P_off + dc OFF(t-1), P = 255 p, nothing before the first bin
+    clip = model.params.clip
+    np.testing.assert_allclose(on_channel, np.where(255.0 * on >= clip, 255.0 * on, 0.0), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(off_channel, 255.0 * off, rtol=0, atol=1e-9)
+    assert (on_channel[both] > 0).all() and (off_channel[both] > 0).all()  # not their difference
+
+
+@pytest.mark.parametrize("name", LGMD_FAMILY)
+def test_lgmd_channels_keep_their_residue_across_event_bins(name):
+    (on1, off1), (on2, off2) = mixed_bins(2, (24, 24), seed=10, density=0.04)
+    model = create_model(name, backend="numpy")
+    model.step_on_off(on1, off1)
+    first_on, first_off = (np.copy(c) for c in lgmd_channel_drives(model))
+    if name == "flgmd_onn":  # the residue of F-LGMD's channels is their settled value
+        first_on, first_off = model._be.ON.copy(), model._be.OFF.copy()
+    model.step_on_off(on2, off2)
+    on_channel, off_channel = lgmd_channel_drives(model)
+    dc, clip = model.params.dc, model.params.clip
+    np.testing.assert_allclose(on_channel, np.where(255.0 * on2 >= clip, 255.0 * on2, 0.0) + dc * first_on,
+                               rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(off_channel, 255.0 * off2 + dc * first_off, rtol=1e-12, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", LGMD_FAMILY)
+@pytest.mark.parametrize("fast", [True, False])
+def test_lgmd_event_channels_match_the_reference_on_pixels_with_both_polarities(name, fast):
+    width = 2 * lanes() + 6
+    bins = mixed_bins(3, (40, width), seed=13, density=0.04)  # sparse: below the FFI
+    assert all(((on > 0) & (off > 0)).any() for on, off in bins)
+    model, ref = create_model(name), create_model(name, backend="numpy")
+    model.fast = fast
+    for on, off in bins:
+        a, b = model.step_on_off(on, off), ref.step_on_off(on, off)
+        assert abs(a.output - b.output) < 1e-5
+    fa, fb = model.fields(), ref.fields()
+    assert set(fa) == set(fb)
+    for k in fb:  # P, ON, OFF and every layer
+        np.testing.assert_allclose(fa[k], fb[k], atol=1e-4 * max(1.0, float(np.abs(fb[k]).max())), rtol=0,
+                                   err_msg=k)
+
+
+@pytest.mark.parametrize("name", LGMD_FAMILY)
+@pytest.mark.parametrize("backend", ["numpy", "taichi"])
+def test_lgmd_pm_and_ffi_take_the_total_contrast_of_both_polarities(name, backend):
+    width = 2 * lanes() + 6
+    on, off = mixed_bins(1, (40, width), seed=9)[0]
+    model = create_model(name, backend=backend)
+    model.step_on_off(on, off)  # builds the backend
+    assert model._be.load_on_off(on, off, False) == pytest.approx(255.0 * (on + off).sum(), rel=1e-6)

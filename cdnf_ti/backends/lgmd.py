@@ -15,8 +15,13 @@ from ..kernels.schedule import MAX_WORKERS
 from ..models.lgmd2 import lowpass_coefficient
 from ..solver import RESTART_GROWTH
 from ..taichi_runtime import cpu_threads, dsl, ensure_taichi, kernels, lanes
-from .events import load_net_contrast
 from .workspace import LaneState
+
+
+def event_bin(p_on: np.ndarray, p_off: np.ndarray) -> np.ndarray:
+    """An event bin as the kernels take it (one array, one upload): ``p_on`` and ``p_off`` (H, W each,
+    contrast in [0, 1]) stacked, float32, shape (2, H, W)."""
+    return np.ascontiguousarray(np.stack([p_on, p_off]), dtype=np.float32)
 
 
 def coefficient_array(K: Any, values: dict[int, Any]) -> np.ndarray:
@@ -113,9 +118,12 @@ class TaichiLGMDBackend:
         return float(out[0])
 
     def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> float:
-        """Take an event bin (H, W each, contrast in [0, 1]) as the net change ``P = 255 (p_on - p_off)``
-        grey levels; returns what :meth:`load` returns (``sum |P|``)."""
-        return load_net_contrast(self, p_on, p_off)
+        """Take an event bin (H, W each, contrast in [0, 1]): the ON channel driven by ``P_on = 255 p_on``,
+        the OFF channel by ``P_off = 255 p_off`` grey levels (:func:`event_bin`, one upload); ``P = P_on - P_off``.
+
+        Returns ``sum (P_on + P_off)``, what the PM/FFI pathway takes (a frame's ``sum |P|``).
+        """
+        return self.load(event_bin(p_on, p_off), first)
 
     def _channel_buffers(self) -> tuple[int, int, int, int]:
         """``(ON(t-1), OFF(t-1), ON, OFF)`` buffers of :meth:`load`: the new channels go into the next
@@ -281,9 +289,12 @@ class LaneTaichiLGMDBackend:
         self._reset_buffers()
 
     def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> float:
-        """Take an event bin (H, W each, contrast in [0, 1]) as the net change ``P = 255 (p_on - p_off)``
-        grey levels; returns what :meth:`load` returns (``sum |P|``)."""
-        return load_net_contrast(self, p_on, p_off)
+        """Take an event bin (H, W each, contrast in [0, 1]): the ON channel driven by ``P_on = 255 p_on``,
+        the OFF channel by ``P_off = 255 p_off`` grey levels (:func:`event_bin`, one upload); ``P = P_on - P_off``.
+
+        Returns ``sum (P_on + P_off)``, what the PM/FFI pathway takes (a frame's ``sum |P|``).
+        """
+        return self.load(event_bin(p_on, p_off), first)
 
     def _reset_buffers(self) -> None:
         """Back to the first buffers of the channels."""
