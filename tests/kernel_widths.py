@@ -50,20 +50,24 @@ def instrument(widths: dict[str, int]) -> None:
 
 
 def exercise() -> None:
-    """Step every model on both paths and on event bins."""
+    """Step every model on both paths and on event bins: random frames (the LGMD family's
+    feed-forward inhibition holds, so its layers are skipped) and a looming square (they run)."""
     from cdnf_ti import create_model
     from cdnf_ti.models.registry import MODELS
+    from cdnf_ti.stimuli.basic import basic_stimulus
 
     rng = np.random.default_rng(0)
     for shape in ((80, 96), (40, 48)):
-        frames = [rng.integers(0, 256, shape, dtype=np.uint8) for _ in range(3)]
+        looming = basic_stimulus("dark_looming", height=shape[0], width=shape[1], backend="numpy")
+        clips = ([rng.integers(0, 256, shape, dtype=np.uint8) for _ in range(3)], list(looming.frames())[:12])
         for name in MODELS:
-            model = create_model(name)
-            model.run(frames)
-            if model.takes_events:
-                p_on = (rng.random(shape) < 0.1) * 0.15
-                p_off = (rng.random(shape) < 0.1) * 0.15
-                model.step_on_off(p_on, p_off)
+            for frames in clips:
+                model = create_model(name)
+                model.run(frames)
+                if model.takes_events:
+                    p_on = (rng.random(shape) < 0.1) * 0.15
+                    p_off = (rng.random(shape) < 0.1) * 0.15
+                    model.step_on_off(p_on, p_off)
 
 
 if __name__ == "__main__":
