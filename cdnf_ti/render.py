@@ -72,6 +72,7 @@ FIELD_CHOICES = {
     "lgmd2": [("ON", "ON"), ("OFF", "OFF"), ("S", "Summation S")],
     "lgmd1": [("ON", "ON"), ("OFF", "OFF"), ("S", "Summation S")],
     "flgmd_onn": [("ON", "ON"), ("OFF", "OFF"), ("S", "Summation S")],
+    "olgmd": [("OFF", "OFF P_off"), ("S", "Summation S"), ("G", "Grouping G")],
     "lplc2": [("horizontal", "EMD left - right"), ("vertical", "EMD up - down"), ("lplc2", "LPLC2 response")],
 }
 PANEL_FONT = cv2.FONT_HERSHEY_SIMPLEX

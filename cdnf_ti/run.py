@@ -68,7 +68,7 @@ from .experiments.parallel import exit_on_second_interrupt, stop_all_pools
 from .frames import IMAGE_EXTENSIONS, iter_grey
 from .inputs import resolve_input
 from .limits import check_drops, check_frame_size
-from .models import create_model
+from .models import create_model, get_model_class
 from .models.base import NotConvergedWarning, run_models
 from .stimuli.rain import RainParams, RainyFrames
 from .taichi_runtime import lanes_override
@@ -192,6 +192,11 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
 
     Returns the summary rows and how many models finished.
     """
+    if isinstance(src, EventSource) and str(args.models).strip().lower() == "all":
+        skipped = [name for name in models if not get_model_class(name).takes_events]
+        if skipped:  # 'all' means every model that takes events
+            print(f"note: {path}: left out of --model all (no event input): {', '.join(skipped)}", file=sys.stderr)
+            models = [name for name in models if name not in skipped]
     instances = [create_model(name, params[name], backend=args.backend, arch=args.arch, fps=src.fps)
                  for name in models]
     rain = None

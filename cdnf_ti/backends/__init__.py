@@ -14,7 +14,7 @@ from __future__ import annotations
 from typing import Any, Callable
 
 from .. import taichi_runtime
-from . import cdnf, lgmd, lplc2, sdnf
+from . import cdnf, lgmd, lplc2, olgmd, sdnf
 
 #: Backend factories by model name: ``factory(model, shape, arch) -> backend``.
 FACTORIES: dict[str, Callable[[Any, tuple[int, int], str], Any]] = {}
@@ -57,6 +57,7 @@ ENGINE = Engine()
 
 register_backend("cdnf", cdnf.make_backend)
 register_backend("sdnf", sdnf.make_backend)
+register_backend("olgmd", olgmd.make_backend)
 for _name in lgmd.FAMILY:
     register_backend(_name, lgmd.make_backend)
 register_backend("lplc2", lplc2.make_backend)

@@ -9,17 +9,19 @@ from __future__ import annotations
 from .base import Model, ModelBackend, NotConvergedWarning, StepResult, Sweepable, Trace
 from .registry import MODELS, create_model, get_model_class, register_model
 
-# The built-in models, imported (so registered) in this order: C-DNF, Table I's comparison models, LGMD1.
+# The built-in models, imported (so registered) in this order: C-DNF, Table I's comparison models, LGMD1,
+# F-LGMD ONn, then the later engine models.
 # isort: off
 from .cdnf import CDNF
 from .sdnf import SDNF, SDNFParams
 from .lgmd2 import LGMD2, LGMD2Params
 from .lgmd1 import LGMD1, LGMD1Params
 from .flgmd import FLGMDONn, FLGMDParams
+from .olgmd import OLGMD, OLGMDParams
 from .lplc2 import LPLC2, LPLC2Params
 # isort: on
 
 __all__ = ["MODELS", "Model", "ModelBackend", "Sweepable", "StepResult", "Trace", "NotConvergedWarning", "CDNF",
            "register_model", "get_model_class", "create_model",
            "LGMD2", "LGMD2Params", "LGMD1", "LGMD1Params", "SDNF", "SDNFParams", "FLGMDONn", "FLGMDParams",
-           "LPLC2", "LPLC2Params"]
+           "OLGMD", "OLGMDParams", "LPLC2", "LPLC2Params"]

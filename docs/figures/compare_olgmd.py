@@ -1,4 +1,5 @@
-"""Oracle check of :mod:`cdnf_ti.olgmd_reference` (``variant="code"``) against the authors' Python.
+"""Oracle check of :mod:`cdnf_ti.olgmd_reference` (``variant="code"``), and of the engine model
+:class:`cdnf_ti.models.OLGMD` (``--ours engine``), against the authors' Python.
 
 Runs ``Core_of_Source_Code/Computer_oLGMD_Python/optimized_LGMD.py`` from the
 user's own checkout of ``Ryannnice/Supplementary_Materials_FFI_ON_OFF`` (it is
@@ -19,7 +20,10 @@ Frame alignment (see :mod:`cdnf_ti.olgmd_reference`): their ``K[i]`` is our
 Usage::
 
     python docs/figures/compare_olgmd.py --repo PATH/Supplementary_Materials_FFI_ON_OFF \\
-        [--size 96] [--real CLIP.mp4 ...] [--real-frames 60] [--real-scale 1.0]
+        [--size 96] [--real CLIP.mp4 ...] [--real-frames 60] [--real-scale 1.0] [--ours reference|engine]
+
+``--ours engine`` runs the engine model (float32 kernels, ``OLGMDParams(variant="code")``, colour
+frames given to its ``step`` as they are) in place of the float64 reference.
 
 Their code takes seconds per frame at 426x240 (pure-Python pixel loops).
 """
@@ -97,11 +101,22 @@ def run_authors(module, frames: list[np.ndarray], fps: float):
     return model
 
 
-def compare(module, frames: list[np.ndarray], fps: float) -> dict:
+def run_ours(frames: list[np.ndarray], fps: float, ours: str = "reference") -> dict[str, np.ndarray]:
+    """Our ``variant="code"`` on ``frames``: ``k``, ``k_raw``, ``aim``, ``spike_sum``, ``alert`` per frame,
+    from the float64 reference or (``ours="engine"``) the engine model."""
+    if ours == "engine":
+        from cdnf_ti.models import OLGMD, OLGMDParams
+
+        tr = OLGMD(OLGMDParams(variant="code"), fps=fps).run(frames)
+        return {"k": tr.output, "alert": tr.spike, **{k: tr.diagnostics[k] for k in ("k_raw", "aim", "spike_sum")}}
+    h, w = frames[0].shape[:2]
+    return OLGMDReference(h, w, variant="code", fps=fps).run(frames)
+
+
+def compare(module, frames: list[np.ndarray], fps: float, which: str = "reference") -> dict:
     """Run both on ``frames`` (BGR uint8) and return the largest differences and the first alerts."""
     theirs = run_authors(module, frames, fps)
-    h, w = frames[0].shape[:2]
-    ours = OLGMDReference(h, w, variant="code", fps=fps).run(frames)
+    ours = run_ours(frames, fps, which)
     n = len(frames)
     k_t = np.array(theirs.K[1:], dtype=np.float64)  # K[i] <-> frame i + 1
     kf_t = np.array(theirs.Kf, dtype=np.float64)  # Kf[i] <-> frame i + 2
@@ -165,6 +180,8 @@ def main(argv=None) -> int:
     ap.add_argument("--real", nargs="*", default=[], help="video files: their first --real-frames frames are run")
     ap.add_argument("--real-frames", type=int, default=60)
     ap.add_argument("--real-scale", type=float, default=1.0, help="resize factor for the real clips (default 1)")
+    ap.add_argument("--ours", choices=("reference", "engine"), default="reference",
+                    help="our side: the float64 reference (default) or the engine model")
     args = ap.parse_args(argv)
     module = load_authors(args.repo)
     clips = [(name, lambda name=name: basic_clip(name, args.size)) for name in args.stimuli]
@@ -176,7 +193,7 @@ def main(argv=None) -> int:
     for name, make in tqdm(clips, desc="clips", file=sys.stderr):
         frames, fps = make()
         with contextlib.redirect_stdout(io.StringIO()):
-            r = compare(module, frames, fps)
+            r = compare(module, frames, fps, args.ours)
         h, w = frames[0].shape[:2]
         print(f"{name:36s} {f'{w}x{h}':>9s} {r['frames']:4d} {r['K']:9.2e} {r['Kf']:9.2e} {r['AIM']:9.2e} "
               f"{r['AIM_rel']:9.2e} {r['Spike']:9.2e} {r['Col_mismatch']:5d} "
