@@ -182,6 +182,7 @@ def core_unit(shape: tuple[int, int]) -> tuple[int, int]:
 
 
 def make_backend(model, shape: tuple[int, int], arch: str) -> Any:
-    """EMD-LPLC2's backend: the lane one on the CPU, else the generic one."""
-    kind = LaneTaichiLPLC2Backend if LaneTaichiLPLC2Backend.supports(shape, arch) else TaichiLPLC2Backend
+    """EMD-LPLC2's backend: the lane one on the CPU (and ``model.fast``), else the generic one."""
+    lane = model.fast and LaneTaichiLPLC2Backend.supports(shape, arch)
+    kind = LaneTaichiLPLC2Backend if lane else TaichiLPLC2Backend
     return kind(model.params, shape, model.fps, model.arch)

@@ -121,6 +121,8 @@ class LPLC2(Model):
     name = "lplc2"
     output_name = "V"
     params_type = LPLC2Params
+    #: the lane kernels where they apply; False: the generic (H, W) kernels that GPUs run
+    fast: bool = True
     description = "EMD-LPLC2 array with a giant-fibre LIF (Zhao et al. 2023); equations from the authors' MATLAB"
 
     #: Threshold sweep (:class:`~cdnf_ti.models.base.Sweepable`): the GF spike threshold.
