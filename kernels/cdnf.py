@@ -2,12 +2,12 @@
 
 Two sets of kernels compute the same equations:
 
-* the generic kernels (``load_frame``, ``contrast_solve``, ``summation_solve``, ...)
-  take ``ti.ndarray``/NumPy arrays of shape (H, W), so one compiled kernel serves
+* the generic kernels (``load_frame``, ``contrast_solve``, ``summation_solve_kernel``, ...)
+  take ``ti.ndarray``/NumPy arrays of planes (H, W), so one compiled kernel serves
   every frame size; used for frames narrower than ``2 * LANES`` pixels and on GPUs
   (up to ``MAX_STEPS`` updates per launch, one parallel loop each);
 * the fast CPU kernels (``lanes_*``) work on lane arrays (vector ndarrays of ``LANES``
-  columns per element, :data:`~cdnf_ti.kernels.common.LANE2`) with ghost columns, visit
+  columns per element, :data:`~cdnf_ti.kernels.common.LANE3`) with ghost columns, visit
   only the rows and columns near a change (pending spans), and run a whole solve in one
   launch with persistent workers (see the sections below and ``docs/PERFORMANCE.md``).
   They compile with explicit vector types (:func:`~cdnf_ti.taichi_runtime.vector_kernel`),
@@ -15,8 +15,15 @@ Two sets of kernels compute the same equations:
   hence :func:`~cdnf_ti.kernels.common.any_lane` and :func:`~cdnf_ti.kernels.common.lane_abs`
   in place of ``.any()`` and ``ti.abs`` there.
 
-``mode`` is a compile-time border code from :mod:`cdnf_ti.kernels.common`. The
-float64 NumPy reference of the same equations is :mod:`cdnf_ti.reference`.
+A backend's state is one stacked array (the planes below: ``x[U_ON + parity, i, e]``), its
+coefficients one small float32 array set when it is built (the slots below, read once per
+stage into locals), and what changes at every launch (buffer parities, updates, the load
+flags) scalar arguments or, for the lane solves, its launch record. Compile-time choices
+(frame width, border ``mode``, radii, the DoG taps, frames or event bins) are bound by kernel
+factories (``lanes_contrast_kernel``, ``lanes_summation_kernel``, ``summation_solve_kernel``),
+cached: a second model compiles nothing new. ``mode`` is a border code from
+:mod:`cdnf_ti.kernels.common`. The float64 NumPy reference of the same equations is
+:mod:`cdnf_ti.reference`.
 """
 
 
