@@ -316,10 +316,13 @@ class NumpySDNFBackend:
         return float(self.E.mean())
 
     def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> float:
-        """Take an event bin: ``P = p_on - p_off`` (H, W each, in [0, 1]), ``E = [|P| >= T_b]``;
-        returns the active fraction ``rho``."""
-        self.P = np.asarray(p_on, np.float64) - np.asarray(p_off, np.float64)
-        self.E = (np.abs(self.P) >= self.params.t_b).astype(np.float64)
+        """Take an event bin (H, W each, in [0, 1]): ``E = [max(p_on, p_off) >= T_b]`` (a pixel with
+        either polarity at the threshold is active; both in one bin do not cancel); ``P = p_on - p_off``
+        (the photoreceptors are not used). Returns the active fraction, as :meth:`load`."""
+        p_on = np.asarray(p_on, np.float64)
+        p_off = np.asarray(p_off, np.float64)
+        self.P = p_on - p_off
+        self.E = (np.maximum(p_on, p_off) >= self.params.t_b).astype(np.float64)
         return float(self.E.mean())
 
     def update(self, b_t: float) -> float:

@@ -95,6 +95,8 @@ class NumpyCDNFBackend(RestingFields):
         self.w_s = dog_kernel(params)
         self.L = np.zeros(self.shape)
         self.P = np.zeros(self.shape)
+        self.P_on = np.zeros(self.shape)  # the ON/OFF input stage: the contrast fields' inputs
+        self.P_off = np.zeros(self.shape)
         u0, v0 = resting_levels(params)
         self.u_on = np.full(self.shape, u0)
         self.u_off = np.full(self.shape, u0)
@@ -115,21 +117,29 @@ class NumpyCDNFBackend(RestingFields):
             g /= 255.0
         self.P = np.zeros(self.shape) if first else g - self.L
         self.L = g
-        if self.start is not None:
-            self.u_on = local_start(np.maximum(self.P, 0.0), self.start[0])
-            self.u_off = local_start(np.maximum(-self.P, 0.0), self.start[0])
+        self._input(np.maximum(self.P, 0.0), np.maximum(-self.P, 0.0))
 
     def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> None:
-        """Take an event bin: ``P = p_on - p_off`` (H, W each, in [0, 1]), the net luminance change
-        in the bin; the photoreceptors' ``L`` is not used. With the local start, ``u_on``/``u_off``
-        start from ``[P]+``/``[-P]+`` as for a frame."""
-        self.P = np.asarray(p_on, np.float64) - np.asarray(p_off, np.float64)
+        """Take an event bin (H, W each, in [0, 1]): the ON field's input is ``P_on = p_on`` and the
+        OFF field's ``P_off = p_off`` (a pixel with both polarities in one bin drives both fields);
+        ``P = p_on - p_off``; the photoreceptors' ``L`` is not used. With the local start,
+        ``u_on = start(p_on)``, ``u_off = start(p_off)``."""
+        p_on = np.asarray(p_on, np.float64)
+        p_off = np.asarray(p_off, np.float64)
+        self.P = p_on - p_off
+        self._input(p_on, p_off)
+
+    def _input(self, p_on: np.ndarray, p_off: np.ndarray) -> None:
+        """The contrast fields' inputs ``P_on``, ``P_off``; with the local start, their starts."""
+        self.P_on, self.P_off = p_on, p_off
         if self.start is not None:
-            self.u_on = local_start(np.maximum(self.P, 0.0), self.start[0])
-            self.u_off = local_start(np.maximum(-self.P, 0.0), self.start[0])
+            self.u_on = local_start(p_on, self.start[0])
+            self.u_off = local_start(p_off, self.start[0])
 
     def clear_input(self) -> None:
         self.P = np.zeros(self.shape)
+        self.P_on = np.zeros(self.shape)
+        self.P_off = np.zeros(self.shape)
 
     # -- field updates ---------------------------------------------------
     def contrast_iterate(self, lam: float, mom: float = 0.0) -> tuple[float, float]:
@@ -138,8 +148,7 @@ class NumpyCDNFBackend(RestingFields):
         Returns the residuals ``max |F(u) - u|`` at the fields before the update.
         """
         p, b = self.params, self.params.border
-        p_on = np.maximum(self.P, 0.0)
-        p_off = -np.minimum(self.P, 0.0)
+        p_on, p_off = self.P_on, self.P_off
         f_on = p_on - p.h + vartheta(correlate(self.u_on, self.w_c, b))
         f_off = p_off - p.h + vartheta(correlate(self.u_off, self.w_c, b))
         d_on = f_on - self.u_on

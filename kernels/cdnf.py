@@ -2,12 +2,12 @@
 
 Two sets of kernels compute the same equations:
 
-* the generic kernels (``load_frame``, ``contrast_solve``, ``summation_solve``, ...)
-  take ``ti.ndarray``/NumPy arrays of shape (H, W), so one compiled kernel serves
+* the generic kernels (``load_frame``, ``contrast_solve``, ``summation_solve_kernel``, ...)
+  take ``ti.ndarray``/NumPy arrays of planes (H, W), so one compiled kernel serves
   every frame size; used for frames narrower than ``2 * LANES`` pixels and on GPUs
   (up to ``MAX_STEPS`` updates per launch, one parallel loop each);
 * the fast CPU kernels (``lanes_*``) work on lane arrays (vector ndarrays of ``LANES``
-  columns per element, :data:`~cdnf_ti.kernels.common.LANE2`) with ghost columns, visit
+  columns per element, :data:`~cdnf_ti.kernels.common.LANE3`) with ghost columns, visit
   only the rows and columns near a change (pending spans), and run a whole solve in one
   launch with persistent workers (see the sections below and ``docs/PERFORMANCE.md``).
   They compile with explicit vector types (:func:`~cdnf_ti.taichi_runtime.vector_kernel`),
@@ -15,8 +15,15 @@ Two sets of kernels compute the same equations:
   hence :func:`~cdnf_ti.kernels.common.any_lane` and :func:`~cdnf_ti.kernels.common.lane_abs`
   in place of ``.any()`` and ``ti.abs`` there.
 
-``mode`` is a compile-time border code from :mod:`cdnf_ti.kernels.common`. The
-float64 NumPy reference of the same equations is :mod:`cdnf_ti.reference`.
+A backend's state is one stacked array (the planes below: ``x[U_ON + parity, i, e]``), its
+coefficients one small float32 array set when it is built (the slots below, read once per
+stage into locals), and what changes at every launch (buffer parities, updates, the load
+flags) scalar arguments or, for the lane solves, its launch record. Compile-time choices
+(frame width, border ``mode``, radii, the DoG taps, frames or event bins) are bound by kernel
+factories (``lanes_contrast_kernel``, ``lanes_summation_kernel``, ``summation_solve_kernel``),
+cached: a second model compiles nothing new. ``mode`` is a border code from
+:mod:`cdnf_ti.kernels.common`. The float64 NumPy reference of the same equations is
+:mod:`cdnf_ti.reference`.
 """
 
 
@@ -47,14 +54,21 @@ EMPTY_HI = -1
 # the Summation field's buffers as (H, W) arrays of their own (the DoG's input, dog_row_pass).
 # Each field keeps two ping-pong buffers, planes ``U_ON + parity`` etc.
 
-L_, P_ = common.L_PLANE, common.P_PLANE  # photoreceptors (the last frame), luminance change P
-S_ = 2  # the Summation input S
-ROW1 = 3  # the Summation DoG's row passes (ROW1, ROW1 + 1)
-U_ON, U_OFF = 5, 7  # the ON and OFF contrast fields, two buffers each
-V_ = 9  # lanes: the Summation field, two buffers
-LANE_PLANES = 11
-REST_U = 9  # generic: the resting state of a contrast field
-PLANES = 10
+L_ = common.L_PLANE  # photoreceptors (the last frame)
+P_ = common.P_PLANE  # the luminance change P (frames), or an event bin's P_on
+P_OFF = 2  # an event bin's P_off (frames: P_on and P_off are [P]+ and [-P]+ of plane P_)
+S_ = 3  # the Summation input S
+ROW1 = 4  # the Summation DoG's row passes (ROW1, ROW1 + 1)
+U_ON, U_OFF = 6, 8  # the ON and OFF contrast fields, two buffers each
+V_ = 10  # lanes: the Summation field, two buffers
+LANE_PLANES = 12
+REST_U = 10  # generic: the resting state of a contrast field
+PLANES = 11
+
+# An event bin comes as one float32 array (2, H, W), ``(p_on, p_off)``, where a frame is (H, W):
+# the kernels that take a frame switch on its dimensions at compile time (``ti.static``), and
+# the contrast solves on ``events`` (a compile-time choice): on an event bin the ON field takes
+# ``P_on = p_on`` and the OFF field ``P_off = p_off`` as they are.
 
 #: Pending spans (lane kernels): one SPANS array (4, H), the contrast group's two parities, then the Summation's.
 SPAN_C, SPAN_S = 0, 2
@@ -143,24 +157,49 @@ def build(ti, lanes: int) -> SimpleNamespace:
         luminance change ``P`` (scalar or lane vector), the input of the ON/OFF contrast fields."""
         return ti.max(sign * p, 0.0)
 
+
+    @ti.func
+    def field_input(x: ti.template(), f: ti.template(), i, e, events: ti.template()):
+        """The input of the contrast field ``f`` (:data:`U_ON` or :data:`U_OFF`) at element ``(i, e)`` of
+        the planes of ``x``: :func:`contrast_input` of ``P`` (frames), or an event bin's ``P_on`` /
+        ``P_off`` as they are (``events``)."""
+        inp = x[P_, i, e]
+        if ti.static(events):
+            if ti.static(f == U_OFF):
+                inp = x[P_OFF, i, e]
+        else:
+            inp = contrast_input(inp, ti.static(1.0 if f == U_ON else -1.0))
+        return inp
+
     LoadRunCtx = context("LoadRunCtx", "frame x coef scale keep c", grid="x")
 
     @ti.func
     def _load_run(ctx: ti.template(), i, j, n: ti.template()):
-        x, coef = ti.static(ctx.x, ctx.coef)
-        p = photoreceptors(ctx.frame, x, i, j, n, ctx.scale, ctx.keep)
+        x, coef, frame = ti.static(ctx.x, ctx.coef, ctx.frame)
+        p_on = ti.Vector([0.0] * n, dt=ti.f32)
+        p_off = ti.Vector([0.0] * n, dt=ti.f32)
+        if ti.static(len(frame.shape) == 3):  # an event bin: (p_on, p_off)
+            p_on = plane_load(frame, 0, i, j, n)
+            p_off = plane_load(frame, 1, i, j, n)
+            plane_store(x, P_, i, j, p_on, n)
+            plane_store(x, P_OFF, i, j, p_off, n)
+        else:
+            p = photoreceptors(frame, x, i, j, n, ctx.scale, ctx.keep)
+            p_on = contrast_input(p, 1.0)
+            p_off = contrast_input(p, -1.0)
         if coef[LOCAL] != 0:
             cs = start_coefficients(coef, START_U)
-            plane_store(x, U_ON + ctx.c, i, j, local_start(contrast_input(p, 1.0), cs), n)
-            plane_store(x, U_OFF + ctx.c, i, j, local_start(contrast_input(p, -1.0), cs), n)
+            plane_store(x, U_ON + ctx.c, i, j, local_start(p_on, cs), n)
+            plane_store(x, U_OFF + ctx.c, i, j, local_start(p_off, cs), n)
         return 0.0
 
 
     @ti.kernel
-    def load_frame(frame: ti.types.ndarray(ndim=2), x: F3, coef: COEFS, scale: ti.f32, first: ti.i32, c: ti.i32,
+    def load_frame(frame: ti.types.ndarray(), x: F3, coef: COEFS, scale: ti.f32, first: ti.i32, c: ti.i32,
                    blocks: ti.i32):
-        """``g = frame * scale``; ``P = g - L`` (0 when ``first``); ``L = g``; with ``coef[LOCAL]``,
-        buffer ``c`` of ``u_on`` = ``start(P_on)`` and of ``u_off`` = ``start(P_off)`` (:func:`local_start`)."""
+        """``g = frame * scale``; ``P = g - L`` (0 when ``first``); ``L = g``; or, for an event bin ``frame``
+        (2, H, W), ``P_on``, ``P_off`` = its planes; with ``coef[LOCAL]``, buffer ``c`` of ``u_on`` =
+        ``start(P_on)`` and of ``u_off`` = ``start(P_off)`` (:func:`local_start`)."""
         keep = ti.select(first != 0, 0.0, 1.0)
         for k in range(x.shape[1] * blocks):
             frame_runs(_load_run, ti.static(LoadRunCtx(frame, x, coef, scale, keep, c)), k, blocks, "sum", 1)
@@ -185,7 +224,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
     @ti.func
     def _contrast_update(x: ti.template(), coef: ti.template(), record: ti.template(), p, j: ti.template(), n,
-                         blocks, mode: ti.template()):
+                         blocks, mode: ti.template(), events: ti.template()):
         """Update ``j`` of a :func:`contrast_solve` launch, from buffer ``p`` of each field into the other:
         one parallel loop, each work item gated by :func:`launch_gate`; its residuals go to ``record[j, 2:4]``."""
         H, W = x.shape[1], x.shape[2]
@@ -199,12 +238,11 @@ def build(ti, lanes: int) -> SimpleNamespace:
                 m_on = 0.0
                 m_off = 0.0
                 for c in range(j0, j1):
-                    pc = x[P_, i, c]
                     s_on = _lateral_3x3(x, U_ON + p, i, c, wc0, wc1, wc2, mode)
                     s_off = _lateral_3x3(x, U_OFF + p, i, c, wc0, wc1, wc2, mode)
-                    n_on, d_on = field_update(contrast_input(pc, 1.0), s_on, x[U_ON + p, i, c], x[U_ON + q, i, c], h,
-                                              lam, mom)
-                    n_off, d_off = field_update(contrast_input(pc, -1.0), s_off, x[U_OFF + p, i, c],
+                    n_on, d_on = field_update(field_input(x, U_ON, i, c, events), s_on, x[U_ON + p, i, c],
+                                              x[U_ON + q, i, c], h, lam, mom)
+                    n_off, d_off = field_update(field_input(x, U_OFF, i, c, events), s_off, x[U_OFF + p, i, c],
                                                 x[U_OFF + q, i, c], h, lam, mom)
                     x[U_ON + q, i, c] = n_on
                     x[U_OFF + q, i, c] = n_off
@@ -216,10 +254,10 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
     @ti.kernel
     def contrast_solve(x: F3, coef: COEFS, record: RECORD, c: ti.i32, n: ti.i32, blocks: ti.i32,
-                       mode: ti.template(), steps: ti.template()):
+                       mode: ti.template(), steps: ti.template(), events: ti.template()):
         """Up to ``n`` ON/OFF updates (fused, :func:`field_update`) in one launch: the generic kernel.
 
-        ``F(u) = P_on - h + vartheta(W_c (*) u)`` (OFF: ``P_off``). Update ``j`` reads buffer
+        ``F(u) = P_on - h + vartheta(W_c (*) u)`` (OFF: ``P_off``; :func:`field_input`). Update ``j`` reads buffer
         ``(c + j) % 2`` of ``u_on``/``u_off`` and writes the other, which holds the iterate before
         on entry, with ``lam, mom = record[j, 0:2]``; its residuals
         ``max|F(u_on) - u_on|``, ``max|F(u_off) - u_off|`` go to ``record[j, 2:4]`` (set to -1 by
@@ -229,7 +267,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
         the stop doing nothing): the kernel for GPUs and narrow frames.
         """
         for j in ti.static(range(steps)):
-            _contrast_update(x, coef, record, (c + j) % 2, j, n, blocks, mode)
+            _contrast_update(x, coef, record, (c + j) % 2, j, n, blocks, mode, events)
 
 
     @ti.kernel
@@ -383,9 +421,10 @@ def build(ti, lanes: int) -> SimpleNamespace:
     def _load_row(frame: ti.template(), x: ti.template(), pend: ti.template(), coef: ti.template(), pp, i, scale,
                   first, W: ti.template(), mode: ti.template()):
         """Row ``i``: ``g = frame * scale``; ``P = g - L`` (0 when ``first``); ``L = g`` (frame columns only);
-        with ``coef[LOCAL]``, buffer ``pp`` of ``u_on``/``u_off`` = :func:`local_start` of ``P_on``/``P_off``.
+        or, for an event bin ``frame`` (2, H, W), ``P_on``, ``P_off`` = its planes; with ``coef[LOCAL]``,
+        buffer ``pp`` of ``u_on``/``u_off`` = :func:`local_start` of ``P_on``/``P_off``.
 
-        Elements where ``P`` or a field changed join the row's pending span of parity ``pp``
+        Elements where the input or a field changed join the row's pending span of parity ``pp``
         (contrast group).
         """
         E1 = (LANES + W - 1) // LANES
@@ -394,19 +433,35 @@ def build(ti, lanes: int) -> SimpleNamespace:
         lo = EMPTY_LO
         hi = EMPTY_HI
         for e in range(1, E1 + 1):
-            g = ti.Vector([0.0] * LANES, dt=ti.f32)
-            for l in ti.static(range(LANES)):
-                c = ti.min((e - 1) * LANES + l, W - 1)
-                g[l] = ti.cast(frame[i, c], ti.f32) * scale
-            p_new = ti.select(first != 0, 0.0, g - x[L_, i, e])
-            moved = any_lane(p_new != x[P_, i, e])
-            if local != 0:
-                moved |= _start_element(x, U_ON + pp, i, e, ti.max(p_new, 0.0), cs, W)
-                moved |= _start_element(x, U_OFF + pp, i, e, ti.max(0.0 - p_new, 0.0), cs, W)
-            lo = ti.select(moved, ti.min(lo, e), lo)
-            hi = ti.select(moved, e, hi)
-            x[P_, i, e] = p_new
-            x[L_, i, e] = g
+            if ti.static(len(frame.shape) == 3):  # an event bin: (p_on, p_off)
+                p_on = ti.Vector([0.0] * LANES, dt=ti.f32)
+                p_off = ti.Vector([0.0] * LANES, dt=ti.f32)
+                for l in ti.static(range(LANES)):
+                    c = ti.min((e - 1) * LANES + l, W - 1)
+                    p_on[l] = frame[0, i, c]
+                    p_off[l] = frame[1, i, c]
+                moved = any_lane(p_on != x[P_, i, e]) | any_lane(p_off != x[P_OFF, i, e])
+                if local != 0:
+                    moved |= _start_element(x, U_ON + pp, i, e, p_on, cs, W)
+                    moved |= _start_element(x, U_OFF + pp, i, e, p_off, cs, W)
+                lo = ti.select(moved, ti.min(lo, e), lo)
+                hi = ti.select(moved, e, hi)
+                x[P_, i, e] = p_on
+                x[P_OFF, i, e] = p_off
+            else:
+                g = ti.Vector([0.0] * LANES, dt=ti.f32)
+                for l in ti.static(range(LANES)):
+                    c = ti.min((e - 1) * LANES + l, W - 1)
+                    g[l] = ti.cast(frame[i, c], ti.f32) * scale
+                p_new = ti.select(first != 0, 0.0, g - x[L_, i, e])
+                moved = any_lane(p_new != x[P_, i, e])
+                if local != 0:
+                    moved |= _start_element(x, U_ON + pp, i, e, ti.max(p_new, 0.0), cs, W)
+                    moved |= _start_element(x, U_OFF + pp, i, e, ti.max(0.0 - p_new, 0.0), cs, W)
+                lo = ti.select(moved, ti.min(lo, e), lo)
+                hi = ti.select(moved, e, hi)
+                x[P_, i, e] = p_new
+                x[L_, i, e] = g
         if lo <= hi:
             pend[SPAN_C + pp, i] = ti.Vector([ti.min(pend[SPAN_C + pp, i][0], lo), ti.max(pend[SPAN_C + pp, i][1], hi)])
             if local != 0:
@@ -416,7 +471,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
     @vector_kernel
     @ti.kernel
-    def lanes_load_frame(frame: ti.types.ndarray(ndim=2), x: LANE3, pend: SPANS, coef: COEFS, pp: ti.i32,
+    def lanes_load_frame(frame: ti.types.ndarray(), x: LANE3, pend: SPANS, coef: COEFS, pp: ti.i32,
                          scale: ti.f32, first: ti.i32, W: ti.template(), mode: ti.template()):
         """:func:`_load_row` for every row. The contrast solve loads a frame itself (its first
         phase); this kernel serves a frame whose fields are needed before that."""
@@ -521,9 +576,10 @@ def build(ti, lanes: int) -> SimpleNamespace:
     # -- the contrast solve --------------------------------------------------------------
 
     @functools.lru_cache(maxsize=None)
-    def lanes_contrast_kernel(W: int, mode: int, R: int):
+    def lanes_contrast_kernel(W: int, mode: int, R: int, events: bool = False):
         """The lane-vectorised contrast solve for frames ``W`` px wide, border ``mode`` and Summation
-        radius ``R`` (compile-time choices: one kernel each, compiled once)."""
+        radius ``R``, loading frames or (``events``) event bins (compile-time choices: one kernel each,
+        compiled once)."""
         E1 = (LANES + W - 1) // LANES
 
         @ti.func
@@ -540,7 +596,6 @@ def build(ti, lanes: int) -> SimpleNamespace:
             ``W_c (*) u = k0 c + k1 (c[j-1] + c[j+1])``.
             """
             H = x.shape[1]
-            sign = ti.static(1.0 if f == U_ON else -1.0)
             u = ti.static(f)
             up = u + p
             im = border_index(i - 1, H, mode)
@@ -557,7 +612,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
                 c_next = k0 * x[up, i, e + 1] + k1 * (wim * x[up, im, e + 1] + wip * x[up, ip, e + 1])
                 left, right = lane_neighbours(c_left, c_cur, c_next[0])
                 s = k0 * c_cur + k1 * (left + right)
-                ad, moved = _relax(x, up, u + 1 - p, i, e, contrast_input(x[P_, i, e], sign), s, h, lam, mom, tau, W)
+                ad, moved = _relax(x, up, u + 1 - p, i, e, field_input(x, f, i, e, events), s, h, lam, mom, tau, W)
                 m = ti.max(m, ad)
                 lo = ti.select(moved, ti.min(lo, e), lo)
                 hi = ti.select(moved, e, hi)
@@ -630,10 +685,11 @@ def build(ti, lanes: int) -> SimpleNamespace:
         contrast_workers = workers(plan)
         ContrastCtx = context("ContrastCtx", "frame x pend record coef")
 
+        FRAME = ti.types.ndarray(ndim=3 if events else 2)  # a frame (H, W), or an event bin (2, H, W)
+
         @vector_kernel
         @ti.kernel
-        def lanes_contrast_solve(frame: ti.types.ndarray(ndim=2), x: LANE3, pend: SPANS, record: RECORD,
-                                 coef: COEFS):
+        def lanes_contrast_solve(frame: FRAME, x: LANE3, pend: SPANS, record: RECORD, coef: COEFS):
             """Up to ``n`` ON/OFF updates (:func:`field_update`) in one launch, by persistent workers
             (``plan`` on the engine's scheduler, :func:`~cdnf_ti.kernels.schedule.build`'s ``workers``).
 
@@ -644,7 +700,8 @@ def build(ti, lanes: int) -> SimpleNamespace:
             launch. The residuals ``max|F(u) - u|`` of each update (ON, OFF; -1 for updates not run)
             go to ``record[j, 2:4]`` (:class:`~cdnf_ti.kernels.common.LaunchRecord`). Only the
             elements near a pending span (same parity as the buffers) are visited.
-            With ``load`` set, the workers first load ``frame`` (:func:`_load_row`; with ``coef[LOCAL]``
+            With ``load`` set, the workers first load ``frame`` (an event bin (2, H, W) with ``events``;
+            :func:`_load_row`; with ``coef[LOCAL]``
             it also sets the contrast fields' local start). When the launch converges, they go on
             to compute the Summation input ``S`` of the result and, with ``coef[LOCAL]``, the local
             start of buffer ``s`` of ``v`` (:func:`_summation_input_row`).

@@ -62,18 +62,26 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
     @ti.func
     def _load_run(ctx: ti.template(), i, j, n: ti.template()):
-        x = ti.static(ctx.x)
-        p = photoreceptors(ctx.frame, x, i, j, n, ctx.scale, ctx.keep)
-        e = ti.select(ti.abs(p) >= ctx.coef[T_B], 1.0, 0.0)
+        x, frame = ti.static(ctx.x, ctx.frame)
+        e = ti.Vector([0.0] * n, dt=ti.f32)
+        if ti.static(len(frame.shape) == 3):  # an event bin: (p_on, p_off)
+            p_on = plane_load(frame, 0, i, j, n)
+            p_off = plane_load(frame, 1, i, j, n)
+            plane_store(x, P_, i, j, p_on - p_off, n)
+            e = ti.select(ti.max(p_on, p_off) >= ctx.coef[T_B], 1.0, 0.0)
+        else:
+            p = photoreceptors(frame, x, i, j, n, ctx.scale, ctx.keep)
+            e = ti.select(ti.abs(p) >= ctx.coef[T_B], 1.0, 0.0)
         plane_store(x, E_, i, j, e, n)
         return run_sum(e, n)
 
 
     @ti.kernel
-    def load_binary(frame: ti.types.ndarray(ndim=2), x: F3, coef: COEFS, scale: ti.f32, first: ti.i32,
+    def load_binary(frame: ti.types.ndarray(), x: F3, coef: COEFS, scale: ti.f32, first: ti.i32,
                     blocks: ti.i32, out: D1):
         """``g = frame * scale`` in [0, 1]; ``P = g - L`` (0 when ``first``); ``E = [|P| >= T_b]``;
-        adds ``sum E`` to ``out[0]`` (set to 0 by the caller)."""
+        or, for an event bin ``frame`` (2, H, W) of ``(p_on, p_off)``, ``P = p_on - p_off`` and
+        ``E = [max(p_on, p_off) >= T_b]``; adds ``sum E`` to ``out[0]`` (set to 0 by the caller)."""
         keep = ti.select(first != 0, 0.0, 1.0)
         for k in range(x.shape[1] * blocks):
             ctx = ti.static(LoadRunCtx(frame, x, coef, scale, keep))

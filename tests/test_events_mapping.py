@@ -72,3 +72,25 @@ def test_the_lgmd_family_sees_on_events_what_it_sees_on_frames(name, backend):
     assert set(fa) == set(fb) and fb["OFF"].max() == 255.0  # the dark square's edge moved
     for f in fb:
         np.testing.assert_array_equal(fa[f], fb[f], err_msg=f)
+
+
+def test_a_pixel_with_on_and_off_events_in_one_bin_drives_both_inputs():
+    # Two ON events and one OFF event in one bin at one pixel: p_on = 2 C, p_off = C. C-DNF's
+    # fields take each as it is, and SDNF's input is active where either reaches T_b (their
+    # net change C alone would stay below it).
+    from cdnf_ti.baselines_reference import NumpySDNFBackend
+    from cdnf_ti.models.sdnf import SDNFParams
+    from cdnf_ti.params import CDNFParams
+    from cdnf_ti.reference import NumpyCDNFBackend
+
+    counts = np.zeros((2, 4, 5), np.int64)
+    counts[1, 1, 2], counts[0, 1, 2] = 2, 1  # ON (index 1) and OFF (index 0) events
+    p_on, p_off = contrast_input(counts, 0.2)
+    assert p_on[1, 2] == pytest.approx(0.4) and p_off[1, 2] == pytest.approx(0.2)
+    cdnf = NumpyCDNFBackend(CDNFParams(), p_on.shape)
+    cdnf.load_on_off(p_on, p_off, True)
+    np.testing.assert_array_equal(cdnf.P_on, p_on)
+    np.testing.assert_array_equal(cdnf.P_off, p_off)
+    sdnf = NumpySDNFBackend(SDNFParams(t_b=0.3), p_on.shape)
+    active = sdnf.load_on_off(p_on, p_off, True)
+    assert sdnf.E[1, 2] == 1.0 and active == pytest.approx(1 / p_on.size)

@@ -1,10 +1,11 @@
 """Event bins through the models' ON/OFF input stage (``Model.step_on_off``, the CLI on event files).
 
-Every model takes a bin as the net luminance change ``P = p_on - p_off`` of its input stage
-(the engine's kernels read one signed ``P``). The compiled paths of all five models are checked
-against the NumPy float64 references on bins with mixed ON and OFF pixels, and C-DNF's Table I
-row (``cdnf_ti.paper.TABLE1``) is checked through the CLI on events of the six basic stimuli
-made by an emulator other than cdnf_ti's.
+C-DNF's ON field takes ``P_on = p_on`` and its OFF field ``P_off = p_off`` (a pixel with both
+polarities in one bin drives both fields); SDNF's input is ``E = [max(p_on, p_off) >= T_b]``; the
+LGMD family takes the net luminance change ``P = p_on - p_off``. The compiled paths of all five
+models are checked against the NumPy float64 references on bins with mixed ON and OFF pixels, and
+C-DNF's Table I row (``cdnf_ti.paper.TABLE1``) is checked through the CLI on events of the six
+basic stimuli made by an emulator other than cdnf_ti's.
 """
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ from cdnf_ti.errors import UserError
 from cdnf_ti.events import open_event_source
 from cdnf_ti.frames import iter_grey
 from cdnf_ti.inputs import resolve_input
-from cdnf_ti.models import create_model
+from cdnf_ti.models import MODELS, create_model
 from cdnf_ti.paper import TABLE1
 from cdnf_ti.run import main
 from cdnf_ti.stimuli.basic import BASIC_STIMULI
@@ -66,11 +67,73 @@ def test_every_event_bin_is_a_full_step_including_bin_0():
     assert trace.output[0] != 0.5
 
 
-def test_a_pixel_with_both_polarities_gets_their_difference():
-    on, off = mixed_bins(1, (24, 24), seed=3)[0]
-    a = CDNF(backend="numpy").run([(on, off)])
-    b = CDNF(backend="numpy").run([(np.maximum(on - off, 0.0), np.maximum(off - on, 0.0))])
-    np.testing.assert_array_equal(a.output, b.output)
+def both_polarities_bin(shape: tuple[int, int], level: float) -> tuple[np.ndarray, np.ndarray]:
+    """A bin whose middle block has ON and OFF events alike (``p_on = p_off = level``): no net change."""
+    on = np.zeros(shape)
+    on[shape[0] // 4: 3 * shape[0] // 4, shape[1] // 4: 3 * shape[1] // 4] = level
+    return on, on.copy()
+
+
+def test_cdnf_drives_both_fields_where_a_pixel_has_both_polarities():
+    on, off = both_polarities_bin((24, 24), 0.6)
+    both = CDNF(backend="numpy")
+    both.step_on_off(on, off)
+    rest = CDNF(backend="numpy")
+    rest.step_on_off(0 * on, 0 * off)
+    f, r = both.fields(), rest.fields()
+    inside = on > 0
+    assert np.all(f["u_on"][inside] > r["u_on"][inside] + 0.1)  # P_on = p_on, not [p_on - p_off]+ = 0
+    assert np.all(f["u_off"][inside] > r["u_off"][inside] + 0.1)
+    np.testing.assert_array_equal(f["P"], on - off)  # the net change, for pictures
+
+
+@pytest.mark.parametrize("fast", [True, False])
+def test_cdnf_compiled_event_input_matches_the_reference_where_a_pixel_has_both_polarities(fast):
+    width = 2 * lanes() + 6
+    bins = [both_polarities_bin((40, width), 0.6), *mixed_bins(2, (40, width), seed=3)]
+    model = CDNF()
+    model.fast = fast
+    a = model.run(bins)
+    ref = CDNF(backend="numpy")
+    b = ref.run(bins)
+    assert isinstance(model._be, LaneTaichiCDNFBackend if fast else TaichiCDNFBackend)
+    assert np.max(np.abs(a.output - b.output)) < 1e-5
+    fa, fb = model.fields(), ref.fields()
+    for k in ("u_on", "u_off", "v", "P"):
+        np.testing.assert_allclose(fa[k], fb[k], rtol=0, atol=1e-4, err_msg=k)
+
+
+@pytest.mark.parametrize("fast", [True, False])
+def test_cdnf_frames_after_event_bins_take_the_on_off_split_of_p_again(fast):
+    # One backend, bins then frames: each input takes its own ON/OFF stage.
+    width = 2 * lanes() + 6
+    rng = np.random.default_rng(8)
+    frames = [rng.integers(0, 256, (40, width), dtype=np.uint8) for _ in range(2)]
+    model, ref = CDNF(), CDNF(backend="numpy")
+    model.fast = fast
+    for m in (model, ref):
+        for on, off in mixed_bins(2, (40, width), seed=9):
+            m.step_on_off(on, off)
+        m.step(frames[0])  # not the first step: P = L(t) - L(t-1), L(t-1) = 0 (the bins set no L)
+        m.step(frames[1])
+    fa, fb = model.fields(), ref.fields()
+    for k in ("u_on", "u_off", "v", "P"):
+        np.testing.assert_allclose(fa[k], fb[k], rtol=0, atol=1e-4, err_msg=k)
+
+
+def test_sdnf_event_input_is_active_where_either_polarity_reaches_the_threshold():
+    width = 2 * lanes() + 6
+    t_b = MODELS["sdnf"].params_type().t_b
+    on, off = both_polarities_bin((40, width), t_b)  # no net change, each polarity at the threshold
+    on[0, :5] = 0.5 * t_b  # below the threshold: inactive
+    model = create_model("sdnf")
+    model.step_on_off(on, off)
+    ref = create_model("sdnf", backend="numpy")
+    ref.step_on_off(on, off)
+    want = (np.maximum(on, off) >= t_b).astype(float)
+    assert want.sum() > 0
+    np.testing.assert_array_equal(ref.fields()["E"], want)
+    np.testing.assert_array_equal(model.fields()["E"], want)
 
 
 @pytest.mark.parametrize("name", ["lgmd1", "lgmd2", "flgmd_onn", "sdnf"])

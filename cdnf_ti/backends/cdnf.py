@@ -16,7 +16,6 @@ from ..kernels.schedule import MAX_WORKERS
 from ..params import THETA_SCALE, CDNFParams, contrast_kernel, dog_profiles, resting_levels
 from ..solver import RESTART_GROWTH, cdnf_local_starts
 from ..taichi_runtime import cpu_threads, dsl, ensure_taichi, kernels, lanes
-from .events import load_net_contrast
 from .workspace import LaneState
 
 V_END = layout.V_ + 2  # the planes past the last field
@@ -104,6 +103,7 @@ class TaichiCDNFBackend:
         self.rest_v = ti.ndarray(ti.f32, self.shape)
         self.c = 0  # index of the current contrast buffers
         self.s = 0  # index of the current Summation buffer
+        self.events = False  # the input is an event bin (load_on_off), not a frame
         u0, v0 = resting_levels(params)
         K.fill_planes(self.x, K.U_ON, K.U_OFF + 2, u0)
         for a in self.v:
@@ -147,16 +147,18 @@ class TaichiCDNFBackend:
 
     def load(self, grey: np.ndarray, first: bool) -> None:
         scale = 1.0 / 255.0 if grey.dtype == np.uint8 else 1.0
+        self.events = False
         self.K.load_frame(grey, self.x, self.coef.array, scale, int(first), self.c, self.blocks)
 
     def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> None:
-        """Take an event bin (H, W each, contrast in [0, 1]): ``P = p_on - p_off``, the net signed
-        contrast the kernels' ON/OFF input stage reads (a pixel with both polarities in one bin
-        gets their difference); returns what :meth:`load` returns."""
-        return load_net_contrast(self, p_on, p_off)
+        """Take an event bin (H, W each, contrast in [0, 1]), one upload: the ON field's input is
+        ``P_on = p_on`` and the OFF field's ``P_off = p_off`` (a pixel with both polarities in one bin
+        drives both fields)."""
+        self.events = True
+        self.K.load_frame(event_bin(p_on, p_off), self.x, self.coef.array, 1.0, int(first), self.c, self.blocks)
 
     def clear_input(self) -> None:
-        self.K.fill_planes(self.x, self.K.P_, self.K.P_ + 1, 0.0)
+        self.K.fill_planes(self.x, self.K.P_, self.K.P_OFF + 1, 0.0)
 
     def contrast_iterate(self, lam: float, mom: float = 0.0) -> tuple[float, float]:
         return self.contrast_iterate_many([(lam, mom)])[0]
@@ -167,7 +169,7 @@ class TaichiCDNFBackend:
         the residuals of the updates run."""
         def launch(rec, chunk):
             self.K.contrast_solve(self.x, self.coef.array, rec.start(chunk), self.c, len(chunk), self.blocks,
-                                  self.mode, self.steps["c"])
+                                  self.mode, self.steps["c"], self.events)
             res = rec.residuals(len(chunk))
             self.c = (self.c + len(res)) % 2
             return res
@@ -213,7 +215,19 @@ class TaichiCDNFBackend:
     def fields(self) -> dict[str, np.ndarray]:
         K, x = self.K, self.x.to_numpy()
         return {"u_on": x[K.U_ON + self.c], "u_off": x[K.U_OFF + self.c], "v": self.v[self.s].to_numpy(),
-                "P": x[K.P_]}
+                "P": net_input(x, self.events)}
+
+
+def event_bin(p_on: np.ndarray, p_off: np.ndarray) -> np.ndarray:
+    """An event bin as the kernels take it: one float32 array (2, H, W), ``(p_on, p_off)``."""
+    return np.stack([np.asarray(p_on, np.float32), np.asarray(p_off, np.float32)])
+
+
+def net_input(planes: np.ndarray, events: bool) -> np.ndarray:
+    """The field ``P`` (the net luminance change) from the input planes: ``P`` (frames), or
+    ``P_on - P_off`` (an event bin)."""
+    p = planes[layout.P_]
+    return p - planes[layout.P_OFF] if events else p
 
 
 class _LaneWorkspace(LaneState):
@@ -292,7 +306,9 @@ class LaneTaichiCDNFBackend:
         self.coef = Coefficients(params, float(params.tol) * self.freeze, min(cpu_threads(), MAX_WORKERS))
         g1, g2 = dog_profiles(params)
         taps = (tuple(float(x) for x in g1.astype(np.float32)), tuple(float(x) for x in g2.astype(np.float32)))
-        self._contrast = K.lanes_contrast_kernel(self.W, self.mode, int(params.radius_s))
+        # the contrast launch for frames and for event bins (compiled when first used)
+        self._contrast = {e: K.lanes_contrast_kernel(self.W, self.mode, int(params.radius_s), e) for e in (False, True)}
+        self.events = False  # the input is an event bin (load_on_off), not a frame
         self._summation = K.lanes_summation_kernel(*taps, self.W, self.mode)
         self._tol32 = float(np.float32(params.tol))
         self.u0, self.v0 = resting_levels(params)
@@ -307,6 +323,7 @@ class LaneTaichiCDNFBackend:
         self._frame_in: tuple[np.ndarray, float, int] | None = None  # taken by load(), not loaded yet
         # the contrast launch's frame argument when it loads none: same dtype as the frames (one compile)
         self._idle_frame = np.zeros((1, 1), np.float32)
+        self._idle_bin = np.zeros((2, 1, 1), np.float32)  # the same for event bins
         with self.lock:
             self._acquire()
 
@@ -385,6 +402,7 @@ class LaneTaichiCDNFBackend:
         scale = 1.0 / 255.0 if grey.dtype == np.uint8 else 1.0
         self._s_ready, self._mean = False, None
         self._frame_in = (grey, scale, int(first))
+        self.events = False
         self.expect_frames(grey.dtype)
 
     def _flush_load(self) -> None:
@@ -396,15 +414,19 @@ class LaneTaichiCDNFBackend:
             self.K.lanes_load_frame(grey, ws.x, ws.pend, self.coef.array, self.c, scale, first, self.W, self.mode)
 
     def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> None:
-        """Take an event bin (H, W each, contrast in [0, 1]): ``P = p_on - p_off``, the net signed
-        contrast the kernels' ON/OFF input stage reads (a pixel with both polarities in one bin
-        gets their difference); returns what :meth:`load` returns."""
-        return load_net_contrast(self, p_on, p_off)
+        """Take an event bin (H, W each, contrast in [0, 1]), one upload: the ON field's input is
+        ``P_on = p_on`` and the OFF field's ``P_off = p_off`` (a pixel with both polarities in one bin
+        drives both fields). As :meth:`load`, the next contrast launch loads it."""
+        self._acquire()
+        self._flush_load()
+        self._s_ready, self._mean = False, None
+        self._frame_in = (event_bin(p_on, p_off), 1.0, int(first))
+        self.events = True
 
     def clear_input(self) -> None:
         ws = self._acquire()
         self._flush_load()
-        self.K.lanes_fill_planes(ws.x, self.K.P_, self.K.P_ + 1, 0.0)
+        self.K.lanes_fill_planes(ws.x, self.K.P_, self.K.P_OFF + 1, 0.0)
         ws.all_active()
         self._s_ready, self._mean = False, None
 
@@ -447,9 +469,9 @@ class LaneTaichiCDNFBackend:
             (frame, scale, first), load = self._frame_in, 1
             self._frame_in = None
         else:
-            frame, scale, first, load = self._idle_frame, 1.0, 0, 0
+            frame, scale, first, load = self._idle_bin if self.events else self._idle_frame, 1.0, 0, 0
         rec = ws.records["c"]
-        self._contrast(frame, ws.x, ws.pend, rec.start(coefs, (c, self.s, len(coefs), load, first, scale)),
+        self._contrast[self.events](frame, ws.x, ws.pend, rec.start(coefs, (c, self.s, len(coefs), load, first, scale)),
                        self.coef.array)
         res = rec.residuals(len(coefs))
         self.c = (c + len(res)) % 2
@@ -499,7 +521,8 @@ class LaneTaichiCDNFBackend:
         ws = self._acquire()
         self._flush_load()
         K, x = self.K, ws.planes()
-        return {"u_on": x[K.U_ON + self.c], "u_off": x[K.U_OFF + self.c], "v": x[K.V_ + self.s], "P": x[K.P_]}
+        return {"u_on": x[K.U_ON + self.c], "u_off": x[K.U_OFF + self.c], "v": x[K.V_ + self.s],
+                "P": net_input(x, self.events)}
 
 
 def make_backend(model, shape: tuple[int, int], arch: str) -> TaichiCDNFBackend | LaneTaichiCDNFBackend:

@@ -7,7 +7,7 @@ from ..kernels import common
 from ..models.sdnf import SDNFParams
 from ..params import THETA_SCALE
 from ..taichi_runtime import dsl, ensure_taichi, kernels
-from .events import load_net_contrast
+from .cdnf import event_bin
 
 
 class TaichiSDNFBackend:
@@ -52,9 +52,13 @@ class TaichiSDNFBackend:
         return float(out[0]) / (self.shape[0] * self.shape[1])
 
     def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> float:
-        """Take an event bin (H, W each, in [0, 1]) as the net change ``P = p_on - p_off``:
-        ``E = [|P| >= T_b]``; returns what :meth:`load` returns (the active fraction)."""
-        return load_net_contrast(self, p_on, p_off)
+        """Take an event bin (H, W each, in [0, 1]), one upload: ``E = [max(p_on, p_off) >= T_b]`` (a
+        pixel with either polarity at the threshold is active), ``P = p_on - p_off``; returns what
+        :meth:`load` returns (the active fraction)."""
+        out = self._load_out
+        out.fill(0.0)
+        self.K.load_binary(event_bin(p_on, p_off), self.x, self.coef, 1.0, int(first), self.blocks, out)
+        return float(out[0]) / (self.shape[0] * self.shape[1])
 
     def update(self, b_t: float) -> float:
         out = self._update_out

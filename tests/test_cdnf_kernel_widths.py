@@ -1,0 +1,62 @@
+"""C-DNF's, SDNF's and the shared helpers' kernels are narrow (kernels/cdnf.py, sdnf.py, common.py):
+few parameters, small contexts, read by name.
+
+What a kernel receives at run time, tuple members counted, is measured by ``tests/kernel_widths.py``;
+these tests read the source, so they need no compiler.
+"""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+KERNELS = Path(__file__).resolve().parent.parent / "kernels"
+MODULES = ["cdnf.py", "sdnf.py", "common.py"]
+MAX_PARAMETERS = 12
+MAX_CONTEXT_MEMBERS = 8
+
+
+def _tree(module: str) -> ast.Module:
+    return ast.parse((KERNELS / module).read_text(encoding="utf-8"))
+
+
+def _is_dsl_function(fn: ast.FunctionDef) -> bool:
+    """Decorated with ``@ti.func`` or ``@ti.kernel``."""
+    return any(isinstance(d, ast.Attribute) and d.attr in ("func", "kernel") for d in fn.decorator_list)
+
+
+@pytest.mark.parametrize("module", MODULES)
+def test_no_kernel_or_func_declares_more_than_twelve_parameters(module):
+    functions = [n for n in ast.walk(_tree(module)) if isinstance(n, ast.FunctionDef) and _is_dsl_function(n)]
+    wide = {fn.name: len(fn.args.args) for fn in functions if len(fn.args.args) > MAX_PARAMETERS}
+    assert len(functions) >= 5 and not wide, wide
+
+
+@pytest.mark.parametrize("module", MODULES)
+def test_every_context_has_at_most_eight_members(module):
+    contexts = {}
+    for node in ast.walk(_tree(module)):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "context":
+            name, fields = (a.value for a in node.args[:2])
+            contexts[name] = fields.split()
+    wide = {k: len(v) for k, v in contexts.items() if len(v) > MAX_CONTEXT_MEMBERS}
+    assert contexts and not wide, wide
+
+
+@pytest.mark.parametrize("module", MODULES)
+def test_contexts_are_read_by_name_not_by_position(module):
+    by_position = [ast.unparse(n) for n in ast.walk(_tree(module)) if isinstance(n, ast.Subscript)
+                   and isinstance(n.value, ast.Name) and n.value.id == "ctx"]
+    assert not by_position, by_position
+
+
+def test_a_row_run_body_and_its_runner_fit_twelve_parameters_with_the_widest_context():
+    # frame_runs(body, ctx, k, blocks, reduce, halo) and body(ctx, i, j, n): 5 and 3 besides the context
+    sizes = []
+    for module in MODULES:
+        for node in ast.walk(_tree(module)):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "context" \
+                    and any(k.arg == "grid" for k in node.keywords):
+                sizes.append(len(node.args[1].value.split()))
+    assert len(sizes) >= 5 and 5 + max(sizes) <= MAX_PARAMETERS, sizes
