@@ -365,15 +365,6 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
 
     @ti.func
-    def _single_columns(body: ti.template(), ctx: ti.template(), im, i, ip, j, stop, W, acc, reduce: ti.template()):
-        """Runs of one column ``j .. stop - 1`` (neighbour columns clamped); returns ``(acc, stop)``."""
-        while j < stop:
-            acc = _combine(acc, body(ctx, im, i, ip, ti.max(j - 1, 0), j, ti.min(j + 1, W - 1), 1), reduce)
-            j += 1
-        return acc, j
-
-
-    @ti.func
     def row_runs(body: ti.template(), ctx: ti.template(), i, j0, j1, H, W, reduce: ti.template(),
                  halo: ti.template()):
         """Call ``body(ctx, im, i, ip, jm, j, jp, n)`` over the columns ``[j0, j1)`` of row ``i``.
@@ -387,13 +378,19 @@ def build(ti, lanes: int) -> SimpleNamespace:
         """
         im = ti.min(ti.max(i - 1, 0), H - 1)
         ip = ti.min(ti.max(i + 1, 0), H - 1)
-        acc, j = _single_columns(body, ctx, im, i, ip, j0, ti.min(j1, halo), W, ti.f64(0.0), reduce)
+        acc = ti.f64(0.0)
+        j = j0
+        while j < ti.min(j1, halo):  # runs of one column (neighbour columns clamped)
+            acc = _combine(acc, body(ctx, im, i, ip, ti.max(j - 1, 0), j, ti.min(j + 1, W - 1), 1), reduce)
+            j += 1
         end = ti.min(j1, W - halo)
         for n in ti.static((CHUNK, QUARTER)):
             while j + n <= end:
                 acc = _combine(acc, body(ctx, im, i, ip, j - 1, j, j + 1, n), reduce)
                 j += n
-        acc, j = _single_columns(body, ctx, im, i, ip, j, j1, W, acc, reduce)
+        while j < j1:
+            acc = _combine(acc, body(ctx, im, i, ip, ti.max(j - 1, 0), j, ti.min(j + 1, W - 1), 1), reduce)
+            j += 1
         return acc
 
 
