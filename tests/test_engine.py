@@ -48,5 +48,26 @@ def test_every_lane_solve_is_one_scheduler_call_with_its_models_plan():
             if n and fn.name not in factories:
                 calls[fn.name] = n
     assert set(calls) == {"lanes_contrast_solve", "lanes_summation_solve", "flgmd_lanes_solve",
-                          "lgmd2_lanes_layers", "lgmd1_lanes_layers"}
+                          "lgmd2_lanes_layers", "lgmd1_lanes_layers", "layers", "lanes_layers"}  # the last two: oLGMD
     assert set(calls.values()) == {1}
+
+
+def _widths() -> dict[str, int]:
+    """The widest call of every kernel and ti.func under kernels/, tuple members counted (tests/kernel_widths.py)."""
+    import json
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, str(ROOT / "tests" / "kernel_widths.py")], capture_output=True, text=True,
+                          timeout=900, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout[proc.stdout.index("{"):])
+
+
+def test_no_kernel_or_func_is_called_with_more_than_twelve_parameters_counting_tuple_members():
+    widths = _widths()
+    # the count covers the lane solves and the generic kernels of every model (not a vacuous pass)
+    assert {"cdnf.py:lanes_contrast_solve", "cdnf.py:contrast_solve", "lgmd.py:flgmd_lanes_solve",
+            "lgmd.py:lgmd1_lanes_layers", "sdnf.py:field_update", "olgmd.py:lanes_layers",
+            "lplc2.py:lanes_arms"} <= set(widths)
+    assert {k: v for k, v in widths.items() if v > 12} == {}

@@ -1,5 +1,4 @@
-"""C-DNF's, SDNF's and the shared helpers' kernels are narrow (kernels/cdnf.py, sdnf.py, common.py):
-few parameters, small contexts, read by name.
+"""The engine's kernels are narrow (every module of kernels/): few parameters, small contexts, read by name.
 
 What a kernel receives at run time, tuple members counted, is measured by ``tests/kernel_widths.py``;
 these tests read the source, so they need no compiler.
@@ -12,7 +11,7 @@ from pathlib import Path
 import pytest
 
 KERNELS = Path(__file__).resolve().parent.parent / "kernels"
-MODULES = ["cdnf.py", "sdnf.py", "common.py"]
+MODULES = sorted(p.name for p in KERNELS.glob("*.py") if p.name != "__init__.py")
 MAX_PARAMETERS = 12
 MAX_CONTEXT_MEMBERS = 8
 
@@ -30,18 +29,17 @@ def _is_dsl_function(fn: ast.FunctionDef) -> bool:
 def test_no_kernel_or_func_declares_more_than_twelve_parameters(module):
     functions = [n for n in ast.walk(_tree(module)) if isinstance(n, ast.FunctionDef) and _is_dsl_function(n)]
     wide = {fn.name: len(fn.args.args) for fn in functions if len(fn.args.args) > MAX_PARAMETERS}
-    assert len(functions) >= 5 and not wide, wide
+    assert functions and not wide, wide
 
 
-@pytest.mark.parametrize("module", MODULES)
-def test_every_context_has_at_most_eight_members(module):
+def test_every_context_has_at_most_eight_members():
     contexts = {}
-    for node in ast.walk(_tree(module)):
+    for node in (n for module in MODULES for n in ast.walk(_tree(module))):
         if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "context":
             name, fields = (a.value for a in node.args[:2])
             contexts[name] = fields.split()
     wide = {k: len(v) for k, v in contexts.items() if len(v) > MAX_CONTEXT_MEMBERS}
-    assert contexts and not wide, wide
+    assert len(contexts) >= 10 and not wide, wide
 
 
 @pytest.mark.parametrize("module", MODULES)
