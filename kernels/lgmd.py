@@ -74,6 +74,11 @@ DELAYED = {
 #: and the one before it, then OFF's. An array, not a ti.Vector of the four indices: with explicit
 #: vector types taichi 1.7.4 crashed (segmentation fault) in a launch that indexed with one.
 B_ON, B_ON_N, B_OFF, B_OFF_N = 0, 1, 2, 3
+#: ... then the solve launch's updates at most, its workers and whether it iterates OFF too
+#: (``bufs[B_N]``, ``bufs[B_NW]``, ``bufs[B_WITH_OFF]``: 0 or 1).
+B_N, B_NW, B_WITH_OFF = 4, 5, 6
+#: The lane load's channel buffers (``bufs`` of :func:`lgmd_lanes_load`): ON's to read and to write, then OFF's.
+L_C_ON, L_S_ON, L_C_OFF, L_S_OFF = 0, 1, 2, 3
 #: Work items per row of the lane load (element blocks), so both CPU threads get rows.
 LOAD_BLOCKS = 4
 
@@ -612,8 +617,8 @@ def build(ti, lanes: int) -> SimpleNamespace:
     @vector_kernel
     @ti.kernel
     def lgmd_lanes_load(
-        frame: ti.types.ndarray(), st: LANE3, c_on: ti.i32, s_on: ti.i32, c_off: ti.i32, s_off: ti.i32,
-        scale: ti.f32, first: ti.i32, coef: F1, W: ti.template(), feedback: ti.template(), out: D1,
+        frame: ti.types.ndarray(), st: LANE3, q: LANE3, bufs: I1, scale: ti.f32, first: ti.i32, coef: F1,
+        W: ti.template(), feedback: ti.template(), out: D1,
     ):
         """:func:`load_frame` on lane fields: photoreceptors ``L``/``P`` and the ON/OFF channels,
         ``st[s_on] = P [P >= clip] + dc st[c_on]`` (same for OFF); adds ``sum |P|`` to ``out[0]``
@@ -630,6 +635,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
         E1 = ti.static((LANES + W - 1) // LANES)
         keep = ti.select(first != 0, 0.0, 1.0)
         for k in range(H * LOAD_BLOCKS):
+            c_on, s_on, c_off, s_off = bufs[L_C_ON], bufs[L_S_ON], bufs[L_C_OFF], bufs[L_S_OFF]
             clip, dc = coef[CLIP], coef[DC]
             qn1, qn2, qf1, qf2 = coef[QN1], coef[QN2], coef[QF1], coef[QF2]
             wn, kn, wf, kf = coef[START_WN], coef[START_KN], coef[START_WF], coef[START_KF]
@@ -659,10 +665,10 @@ def build(ti, lanes: int) -> SimpleNamespace:
                     st[OFF0_, i, e] = b
                     cn, en, dn = lane_edge_diag(st, c_on, im, i, ip, e)
                     qn = _symmetric(cn, en, dn, 0.0, qn1, qn2)
-                    st[Q_ON_, i, e] = qn
+                    q[0, i, e] = qn
                     cf, ef, df = lane_edge_diag(st, c_off, im, i, ip, e)
                     qf = _symmetric(cf, ef, df, 0.0, qf1, qf2)
-                    st[Q_OFF_, i, e] = qf
+                    q[1, i, e] = qf
                     a = feedback_start(a, qn, wn, kn)
                     b = feedback_start(b, qf, wf, kf)
                 st[s_on, i, e] = a
@@ -674,48 +680,46 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
 
     @ti.func
-    def _lane_relax(st: ti.template(), channel: ti.template(), p, n, im, i, ip, e, w, beta, lam, mom):
+    def _lane_relax(st: ti.template(), q: ti.template(), channel: ti.template(), p, n, i, e, w, beta, lam, mom):
         """Element ``(i, e)`` of ``channel`` (0: ON, 1: OFF): buffer ``n`` of the state = the update
         (:func:`feedback_update`) of buffer ``p``; returns ``|T(X) - X|``.
 
         A function of its own, called by the row (not written into its loop): with float
         reassociation on, the function boundary changes the order of the sums that taichi emits."""
+        im = ti.max(i - 1, 0)
+        ip = ti.min(i + 1, st.shape[1] - 1)
         c, ed, dg = lane_edge_diag(st, p, im, i, ip, e)
         new, d = feedback_update(st[ON0_ + channel, i, e], c,
-                                 feedback_local(c, ed, dg, w, st[Q_ON_ + channel, i, e]), st[n, i, e], beta, lam, mom)
+                                 feedback_local(c, ed, dg, w, q[channel, i, e]), st[n, i, e], beta, lam, mom)
         st[n, i, e] = new
         return lane_abs(d)
 
 
     @ti.func
-    def _lane_update_row(st: ti.template(), channel: ti.template(), p, n, i, w, beta, lam, mom, W: ti.template()):
+    def _lane_update_row(st: ti.template(), q: ti.template(), channel: ti.template(), p, n, i, w, beta, lam, mom,
+                         W: ti.template()):
         """Row ``i`` of one update of ``channel`` (buffer ``p`` into ``n``, :func:`_lane_relax`).
 
         Returns the row's ``max |T(X) - X|`` on its frame columns."""
         E1 = ti.static((LANES + W - 1) // LANES)
-        im = ti.max(i - 1, 0)
-        ip = ti.min(i + 1, st.shape[1] - 1)
         m = ti.Vector([0.0] * LANES, dt=ti.f32)
         for e in range(1, E1 + 1):
-            m = ti.max(m, _lane_relax(st, channel, p, n, im, i, ip, e, w, beta, lam, mom) * lane_mask(e, W))
+            m = ti.max(m, _lane_relax(st, q, channel, p, n, i, e, w, beta, lam, mom) * lane_mask(e, W))
         fill_ghosts(st, n, i, 1, 1, W, 1, REPLICATE)
         return run_max(m, LANES)
 
 
     @ti.func
-    def _lane_finish_row(st: ti.template(), coef: ti.template(), f_on, f_off, i, W: ti.template()):
+    def _lane_finish_row(st: ti.template(), q: ti.template(), f_on, f_off, i, wn, wf, t_s, W: ti.template()):
         """Row ``i`` of ``S_on``, ``S_off`` and ``S`` at the fixed point (channels: buffers ``f_on``/``f_off``)."""
         E1 = ti.static((LANES + W - 1) // LANES)
         im = ti.max(i - 1, 0)
         ip = ti.min(i + 1, st.shape[1] - 1)
-        wn = coef3(coef, WN)
-        wf = coef3(coef, WF)
-        t_s = coef[T_S]
         for e in range(1, E1 + 1):
             cn, en, dn = lane_edge_diag(st, f_on, im, i, ip, e)
-            a = feedback_local(cn, en, dn, wn, st[Q_ON_, i, e])
+            a = feedback_local(cn, en, dn, wn, q[0, i, e])
             cf, ef, df = lane_edge_diag(st, f_off, im, i, ip, e)
-            b = feedback_local(cf, ef, df, wf, st[Q_OFF_, i, e])
+            b = feedback_local(cf, ef, df, wf, q[1, i, e])
             st[S_ON_, i, e] = a
             st[S_OFF_, i, e] = b
             st[S_, i, e] = summed_layer(a, b, t_s)
@@ -749,13 +753,11 @@ def build(ti, lanes: int) -> SimpleNamespace:
     @ti.func
     def _feedback_stage(ctx: ti.template(), i0, i1, j):
         """Update ``j`` of the feedback iteration on rows ``[i0, i1)``: ON's buffer ``bufs[B_ON]`` (``j`` even)
-        or ``bufs[B_ON_N]`` into the other one, the same for OFF (only ``with_off``); maxes the residuals into
-        ``rbuf[j, 0:2]``."""
-        st, coef, bufs, W = ti.static(ctx.st, ctx.coef, ctx.bufs, ctx.W)
+        or ``bufs[B_ON_N]`` into the other one, the same for OFF (where ``bufs[B_WITH_OFF]`` is 1); maxes the residuals
+        into ``rbuf[j, 0:2]``."""
+        st, q, coef, bufs, W = ti.static(ctx.st, ctx.q, ctx.coef, ctx.bufs, ctx.W)
         lam = ctx.record[j, 0]
         mom = ctx.record[j, 1]
-        wn = coef3(coef, WN)
-        wf = coef3(coef, WF)
         beta_on = coef[BETA_ON]
         beta_off = coef[BETA_OFF]
         on, on_n, off, off_n = bufs[B_ON], bufs[B_ON_N], bufs[B_OFF], bufs[B_OFF_N]
@@ -763,13 +765,14 @@ def build(ti, lanes: int) -> SimpleNamespace:
         dst_on = on + on_n - src_on
         src_off = ti.select(j % 2 == 0, off, off_n)
         dst_off = off + off_n - src_off
+        with_off = bufs[B_WITH_OFF]
         m_on = 0.0
         m_off = 0.0
         for i in range(i0, i1):
-            m_on = ti.max(m_on, _lane_update_row(st, 0, src_on, dst_on, i, wn, beta_on, lam, mom, W))
-            if ti.static(ctx.with_off):
-                m_off = ti.max(m_off, _lane_update_row(st, 1, src_off, dst_off, i, wf, beta_off, lam, mom,
-                                                       W))
+            m_on = ti.max(m_on, _lane_update_row(st, q, 0, src_on, dst_on, i, ctx.wn, beta_on, lam, mom, W))
+            if with_off != 0:
+                m_off = ti.max(m_off, _lane_update_row(st, q, 1, src_off, dst_off, i, ctx.wf, beta_off,
+                                                       lam, mom, W))
         ti.atomic_max(rbuf[j, 0], m_on)
         ti.atomic_max(rbuf[j, 1], m_off)
 
@@ -779,10 +782,10 @@ def build(ti, lanes: int) -> SimpleNamespace:
         bufs = ti.static(ctx.bufs)
         f_on = ti.select(ran % 2 == 0, bufs[B_ON], bufs[B_ON_N])  # the buffers holding the result
         f_off = bufs[B_OFF]
-        if ti.static(ctx.with_off):
+        if bufs[B_WITH_OFF] != 0:
             f_off = ti.select(ran % 2 == 0, bufs[B_OFF], bufs[B_OFF_N])
         for i in range(i0, i1):
-            _lane_finish_row(ctx.st, ctx.coef, f_on, f_off, i, ctx.W)
+            _lane_finish_row(ctx.st, ctx.q, f_on, f_off, i, ctx.wn, ctx.wf, ctx.coef[T_S], ctx.W)
 
     @ti.func
     def _group_stage(ctx: ti.template(), i0, i1, j):
@@ -797,33 +800,39 @@ def build(ti, lanes: int) -> SimpleNamespace:
     @ti.func
     def _flgmd_controls(ctx: ti.template()):
         """F-LGMD's solve: its workers, rows, updates at most and stopping rule."""
-        return ctx.nw, ctx.st.shape[1], ctx.n, ctx.coef[TOL], ctx.coef[GROW]
+        return ctx.bufs[B_NW], ctx.st.shape[1], ctx.bufs[B_N], ctx.coef[TOL], ctx.coef[GROW]
 
     FLGMD_PLAN = Plan(update=(_feedback_stage,), after=(_feedback_finish_stage, _group_stage),
                       controls=_flgmd_controls)
     flgmd_workers = workers(FLGMD_PLAN)
-    FLGMDCtx = context("FLGMDCtx", "st coef bufs record n nw W with_off")
+    FLGMDCtx = context("FLGMDCtx", "st q coef bufs record W wn wf")
 
     @vector_kernel
     @ti.kernel
-    def flgmd_lanes_solve(st: LANE3, bufs: I1, record: ti.types.ndarray(dtype=ti.f32, ndim=2), n: ti.i32, coef: F1,
-                          nw: ti.i32, W: ti.template(), with_off: ti.template(), out: D1):
-        """Up to ``n`` feedback updates (:func:`flgmd_iterate`) in one launch, then the layers
+    def flgmd_lanes_solve(st: LANE3, q: LANE3, bufs: I1, record: ti.types.ndarray(dtype=ti.f32, ndim=2), coef: F1,
+                          W: ti.template(), out: D1):
+        """Up to ``bufs[B_N]`` feedback updates (:func:`flgmd_iterate`) in one launch, then the layers
         (:data:`FLGMD_PLAN` on the engine's scheduler).
 
         Update ``j`` uses ``lam, mom = record[j, 0:2]`` and reads the ON channel's buffer
         ``bufs[B_ON]`` (``j`` even) or ``bufs[B_ON_N]`` (``j`` odd), writing the other one (OFF:
-        ``bufs[B_OFF]``/``bufs[B_OFF_N]``); OFF is iterated only ``with_off``. The updates stop after the
-        first one whose residuals are both ``<= coef[TOL]``, or one whose worst residual exceeds
-        ``coef[GROW]`` times the best of the launch. When the launch converged, the workers compute
-        ``S_on``, ``S_off``, ``S`` and ``G`` of the result (as :func:`flgmd_lanes_finish`). In its serial
-        tail it writes the ON and OFF residuals of each update to ``record[j, 2:4]`` (-1: not run,
+        ``bufs[B_OFF]``/``bufs[B_OFF_N]``); OFF is iterated only where ``bufs[B_WITH_OFF]`` is 1; at most
+        ``bufs[B_N]`` updates, by ``bufs[B_NW]`` workers. The updates stop after the first one whose
+        residuals are both ``<= coef[TOL]``, or one whose worst residual exceeds ``coef[GROW]`` times
+        the best of the launch. When the launch converged, the workers compute ``S_on``, ``S_off``, ``S``
+        and ``G`` of the result (as :func:`flgmd_lanes_finish`). In its serial tail it writes the ON and
+        OFF residuals of each update to ``record[j, 2:4]`` (-1: not run,
         :class:`~cdnf_ti.kernels.common.LaunchRecord`) and ``sum G`` to ``out[0]`` (-1 when the
         launch did not converge).
         """
         msum[0] = 0.0
         msum[1] = 0.0
-        ctx = ti.static(FLGMDCtx(st, coef, bufs, record, n, nw, W, with_off))
+        # W_x of ON and OFF read here, in the kernel's serial part, and handed down to the rows (as the
+        # scalar arguments of the code before the state array were): read in the stages or rows instead,
+        # taichi 1.7.4's float reassociation ordered feedback_local's sums differently (not bit-identical).
+        wn = coef3(coef, WN)
+        wf = coef3(coef, WF)
+        ctx = ti.static(FLGMDCtx(st, q, coef, bufs, record, W, wn, wf))
         flgmd_workers(ctx)
         sched.residuals_to(record, 2)
         out[0] = -1.0
@@ -833,7 +842,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
     @vector_kernel
     @ti.kernel
-    def flgmd_lanes_finish(st: LANE3, on: ti.i32, off: ti.i32, coef: F1, W: ti.template(), out: D1):
+    def flgmd_lanes_finish(st: LANE3, q: LANE3, on: ti.i32, off: ti.i32, coef: F1, W: ti.template(), out: D1):
         """:func:`flgmd_finish` on lane fields (channels: buffers ``on``/``off``); ``out[0] = sum G``
         (set to 0 by the caller).
 
@@ -841,8 +850,11 @@ def build(ti, lanes: int) -> SimpleNamespace:
         the layers itself when it does).
         """
         H = st.shape[1]
+        wn = coef3(coef, WN)  # read here and handed down, as in flgmd_lanes_solve
+        wf = coef3(coef, WF)
+        t_s = coef[T_S]
         for i in range(H):
-            _lane_finish_row(st, coef, on, off, i, W)
+            _lane_finish_row(st, q, on, off, i, wn, wf, t_s, W)
         for i in range(H):
             ti.atomic_add(out[0], _lane_box_row(st, S_, G_, i, W, "sum"))
 

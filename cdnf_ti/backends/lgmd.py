@@ -215,6 +215,10 @@ class LGMDLanes(LaneState):
         _, nb = C.lane_layout(W)
         self.layout = StateLayout(kernels("lgmd").STATE_LAYERS[self.MODEL], self.CHANNEL_BUFFERS)
         self.state = C.lane_array(self.layout.size, H=H, NB=nb)
+        # F-LGMD's constant inhibitions Q of ON and OFF: an array of their own (the lane kernels leave the
+        # state's q_on/q_off planes unused): with Q a plane of the state, taichi 1.7.4's float reassociation
+        # ordered the sums of feedback_local differently. The other models pass the state (not read).
+        self.q = C.lane_array(2, H=H, NB=nb) if self.MODEL == "flgmd_onn" else self.state
 
 
 class LaneTaichiLGMDBackend:
@@ -256,6 +260,7 @@ class LaneTaichiLGMDBackend:
         self.ws = self.workspace_type(self.shape)  # this backend's own arrays
         self.lock = self.ws.lock  # the process's scratch: held by the model around each frame (Model.step)
         self._load_out = np.zeros(1)  # lgmd_lanes_load's sum |P|
+        self._load_bufs = np.zeros(4, np.int32)  # lgmd_lanes_load's channel buffers
         self._setup()
         ti = dsl()
         self.coef = ti.ndarray(ti.f32, self.K.N_COEFS)
@@ -309,8 +314,9 @@ class LaneTaichiLGMDBackend:
         scale = 1.0 if grey.dtype == np.uint8 else 255.0
         out = self._load_out
         out.fill(0.0)
-        self.K.lgmd_lanes_load(grey, ws.state, self._on(c_on), self._on(s_on), self._off(c_off), self._off(s_off),
-                               scale, int(first), self.coef, self.W, feedback, out)
+        bufs = self._load_bufs
+        bufs[:] = self._on(c_on), self._on(s_on), self._off(c_off), self._off(s_off)  # kernels.lgmd.L_C_ON, ...
+        self.K.lgmd_lanes_load(grey, ws.state, ws.q, bufs, scale, int(first), self.coef, self.W, feedback, out)
         return float(out[0])
 
     def _channel_buffers(self) -> tuple[int, int]:
@@ -511,7 +517,7 @@ class LaneTaichiFLGMDBackend(LaneTaichiLGMDBackend):
         self._record = LaunchRecord(2)  # flgmd_lanes_solve's coefficients in, residuals out
         self._solve_out = np.zeros(1)  # flgmd_lanes_solve's sum G (-1: not converged)
         self._finish_out = np.zeros(1)  # flgmd_lanes_finish's sum G
-        self._bufs = np.zeros(4, np.int32)  # flgmd_lanes_solve's buffers (kernels.lgmd.B_ON...)
+        self._bufs = np.zeros(7, np.int32)  # flgmd_lanes_solve's buffers (kernels.lgmd.B_ON...), updates, workers, OFF
 
     def _coefficients(self) -> dict[int, Any]:
         return {**super()._coefficients(), **_flgmd_coefficients(self.K, self.params, self.dt)}
@@ -545,9 +551,9 @@ class LaneTaichiFLGMDBackend(LaneTaichiLGMDBackend):
         cur = list(self.iterate)
         other = [3 - self.settled[k] - cur[k] for k in range(2)]  # the third buffer: the iterate before
         rec, out, bufs = self._record, self._solve_out, self._bufs
-        bufs[:] = self._on(cur[0]), self._on(other[0]), self._off(cur[1]), self._off(other[1])  # B_ON, ...
-        self.K.flgmd_lanes_solve(ws.state, bufs, rec.start(coefs), len(coefs), self.coef, self.nw, self.W, with_off,
-                                 out)
+        bufs[:] = (self._on(cur[0]), self._on(other[0]), self._off(cur[1]), self._off(other[1]),  # B_ON, ...
+                   len(coefs), self.nw, int(with_off))  # B_N, B_NW, B_WITH_OFF
+        self.K.flgmd_lanes_solve(ws.state, ws.q, bufs, rec.start(coefs), self.coef, self.W, out)
         res = rec.residuals(len(coefs))
         if len(res) % 2:
             self.iterate = [other[0], other[1] if with_off else cur[1]]
@@ -561,7 +567,8 @@ class LaneTaichiFLGMDBackend(LaneTaichiLGMDBackend):
             return self._sum_g
         out = self._finish_out
         out.fill(0.0)
-        self.K.flgmd_lanes_finish(self._acquire().state, self._on(self.settled[0]), self._off(self.settled[1]),
+        ws = self._acquire()
+        self.K.flgmd_lanes_finish(ws.state, ws.q, self._on(self.settled[0]), self._off(self.settled[1]),
                                   self.coef, self.W, out)
         return float(out[0])
 
