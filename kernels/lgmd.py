@@ -95,6 +95,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
     lanes per vector element of the fast path: a namespace of every name below (and the
     module-level constants). Built once per (compiler, lanes), after the runtime started."""
     C = common.build(ti, lanes)
+    run_get, run_put = C.plane_load, C.plane_store  # a layer of the state on a run of columns
     sched = schedule.build(ti, lanes)
     workers = sched.workers
     rbuf, msum = sched.rbuf, sched.msum  # the scheduler's scratch (one set per process)
@@ -145,22 +146,6 @@ def build(ti, lanes: int) -> SimpleNamespace:
         if ti.static(k != NO_CENTRE):
             v = coef[k]
         return v
-
-
-    @ti.func
-    def run_get(x: ti.template(), k, i, j, n: ti.template()):
-        """Layer ``k`` of the state ``x`` on the run ``(i, j .. j + n - 1)``: a float32 vector of n values."""
-        v = ti.Vector([0.0] * n, dt=ti.f32)
-        for c in ti.static(range(n)):
-            v[c] = x[k, i, j + c]
-        return v
-
-
-    @ti.func
-    def run_put(x: ti.template(), k, i, j, v, n: ti.template()):
-        """Layer ``k`` of the state ``x`` on the run ``(i, j .. j + n - 1)`` ``= v``."""
-        for c in ti.static(range(n)):
-            x[k, i, j + c] = v[c]
 
 
     @ti.func

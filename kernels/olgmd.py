@@ -52,12 +52,13 @@ def build(ti, lanes: int) -> SimpleNamespace:
     sched = schedule.build(ti, lanes)
     workers = sched.workers
     run_load, block_span = block.run_load, block.block_span
+    rload, rstore = block.plane_load, block.plane_store  # a plane of a stacked array on a run of columns
     LANE3 = block.LANE3
     lane_edge_diag, lane_mask, fill_ghosts = block.lane_edge_diag, block.lane_mask, block.fill_ghosts
 
-    F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
+    F1 = block.COEFS
     F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
-    F3 = ti.types.ndarray(dtype=ti.f32, ndim=3)
+    F3 = block.F3
     D1 = ti.types.ndarray(dtype=ti.f64, ndim=1)  # a launch's results, zeroed by the caller
 
     # -- the per-pixel equations (scalars or vectors of a run's columns) ------------------------
@@ -96,20 +97,6 @@ def build(ti, lanes: int) -> SimpleNamespace:
         return ti.select(g * cde < tde, 0.0, g)
 
     # -- runs of a row ----------------------------------------------------------------------
-    @ti.func
-    def rload(x: ti.template(), k, i, j, n: ti.template()):
-        """``x[k, i, j .. j + n - 1]`` as a float32 vector of n values."""
-        v = ti.Vector([0.0] * n, dt=ti.f32)
-        for q in ti.static(range(n)):
-            v[q] = x[k, i, j + q]
-        return v
-
-    @ti.func
-    def rstore(x: ti.template(), k, i, j, v, n: ti.template()):
-        """``x[k, i, j .. j + n - 1] = v``."""
-        for q in ti.static(range(n)):
-            x[k, i, j + q] = v[q]
-
     @ti.func
     def neighbours(x: ti.template(), k, pos, n: ti.template()):
         """Centre, edge sum and diagonal sum of plane ``k`` of ``x`` on the run at

@@ -16,7 +16,7 @@ from ..kernels.schedule import MAX_WORKERS
 from ..params import THETA_SCALE, CDNFParams, contrast_kernel, dog_profiles, resting_levels
 from ..solver import RESTART_GROWTH, cdnf_local_starts
 from ..taichi_runtime import cpu_threads, dsl, ensure_taichi, kernels, lanes
-from .workspace import LaneState
+from .workspace import LaneState, event_bin
 
 V_END = layout.V_ + 2  # the planes past the last field
 
@@ -216,11 +216,6 @@ class TaichiCDNFBackend:
         K, x = self.K, self.x.to_numpy()
         return {"u_on": x[K.U_ON + self.c], "u_off": x[K.U_OFF + self.c], "v": self.v[self.s].to_numpy(),
                 "P": net_input(x, self.events)}
-
-
-def event_bin(p_on: np.ndarray, p_off: np.ndarray) -> np.ndarray:
-    """An event bin as the kernels take it: one float32 array (2, H, W), ``(p_on, p_off)``."""
-    return np.stack([np.asarray(p_on, np.float32), np.asarray(p_off, np.float32)])
 
 
 def net_input(planes: np.ndarray, events: bool) -> np.ndarray:

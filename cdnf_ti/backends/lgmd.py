@@ -15,13 +15,7 @@ from ..kernels.schedule import MAX_WORKERS
 from ..models.lgmd2 import lowpass_coefficient
 from ..solver import RESTART_GROWTH
 from ..taichi_runtime import cpu_threads, dsl, ensure_taichi, kernels, lanes
-from .workspace import LaneState
-
-
-def event_bin(p_on: np.ndarray, p_off: np.ndarray) -> np.ndarray:
-    """An event bin as the kernels take it (one array, one upload): ``p_on`` and ``p_off`` (H, W each,
-    contrast in [0, 1]) stacked, float32, shape (2, H, W)."""
-    return np.ascontiguousarray(np.stack([p_on, p_off]), dtype=np.float32)
+from .workspace import LaneState, event_bin
 
 
 def coefficient_array(K: Any, values: dict[int, Any]) -> np.ndarray:

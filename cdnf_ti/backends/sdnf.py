@@ -7,7 +7,7 @@ from ..kernels import common
 from ..models.sdnf import SDNFParams
 from ..params import THETA_SCALE
 from ..taichi_runtime import dsl, ensure_taichi, kernels
-from .cdnf import event_bin
+from .workspace import event_bin
 
 
 class TaichiSDNFBackend:
