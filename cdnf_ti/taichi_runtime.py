@@ -379,9 +379,10 @@ def lanes() -> int:
     return lane_count(_compiler)  # type: ignore[arg-type]
 
 
-def kernels(name: str):
+def kernels(name):
     """The kernels of ``kernels/<name>.py`` (``"cdnf"``, ``"lgmd"``, ``"sdnf"``, ``"stimuli"``, ``"common"``),
-    built for this process's compiler and lane count on first use (the module's ``build(ti, lanes)``).
+    built for this process's compiler and lane count on first use (the module's ``build(ti, lanes)``);
+    ``name`` may also be a ``build(ti, lanes)`` function itself (a model defined outside the package).
 
     The kernel modules define their kernels in that factory, so importing them loads no compiler; this
     is the one place that builds them, once per process (a second model compiles nothing new).
@@ -391,8 +392,8 @@ def kernels(name: str):
         got = _built.get(name)
         if got is None:
             ti = dsl()
-            module = importlib.import_module(f"{__package__}.kernels.{name}")
-            got = _built[name] = module.build(ti, lanes())
+            build = name if callable(name) else importlib.import_module(f"{__package__}.kernels.{name}").build
+            got = _built[name] = build(ti, lanes())
         return got
 
 
