@@ -133,12 +133,15 @@ def coefficient_array(coefs: Coefs, values: dict) -> "list[float]":
 class Stage:
     """A stage: ``fn(a)`` on every cell, then the reductions of what it returns (``sums``/``maxes``: the
     names of its results, in the order it returns them; one kind per stage), the ghost columns of the
-    planes in ``ghosts`` refreshed after each row (lane layout; ``halo`` columns)."""
+    planes in ``ghosts`` refreshed after each row (lane layout; ``halo`` columns). An update stage of a
+    solve returns ``residuals`` (1 or 2) values instead, maxed per update (:class:`Launch`)."""
 
-    def __init__(self, fn, sums: str = "", maxes: str = "", ghosts=(), halo: int = 1):
+    def __init__(self, fn, sums: str = "", maxes: str = "", ghosts=(), halo: int = 1, residuals: int = 0):
         if sums and maxes:
             raise ValueError("a stage reduces by one kind (sums or maxes)")
-        self.fn, self.ghosts, self.halo = fn, tuple(ghosts), int(halo)
+        if residuals and (sums or maxes or residuals > 2):
+            raise ValueError("an update stage returns its 1 or 2 residuals only")
+        self.fn, self.ghosts, self.halo, self.residuals = fn, tuple(ghosts), int(halo), int(residuals)
         self.results = tuple((sums or maxes).split())
         self.kind = "max" if maxes else "sum"
         if len(self.results) > 2:
@@ -146,10 +149,23 @@ class Stage:
 
 
 class Launch:
-    """A launch: its stages one after another (a barrier between two), its results named by its stages."""
+    """A launch: its stages one after another (a barrier between two), its results named by its stages.
 
-    def __init__(self, name: str, *stages: Stage):
+    A solve also has ``update`` stages (at most 2): after the ``before`` stages, up to ``updates`` updates
+    run while the residuals they return stay above ``tol`` and do not grow past ``grow`` times the best
+    (those three are launch scalars of ``scalars``), then ``stages`` run if the solve converged. An update
+    reads its index as ``a.step`` and its row of the launch record as ``a.record(k)``."""
+
+    def __init__(self, name: str, *stages: Stage, update=(), before=(), scalars: "Scalars | None" = None):
         self.name, self.stages = name, tuple(stages)
+        self.update, self.before = tuple(update), tuple(before)
+        self.fields = max((s.residuals for s in self.update), default=0)
+        self.controls = None
+        if self.update:
+            if scalars is None or not all(hasattr(scalars, n) for n in ("updates", "tol", "grow")):
+                raise ValueError(f"{name}: a solve needs the launch scalars updates, tol, grow")
+            self.controls = (scalars.updates.slot, scalars.tol.slot, scalars.grow.slot)
+        stages = self.before + self.stages
         self.results = tuple(r for s in stages for r in s.results)
         if len(self.results) > MAX_RESULTS:
             raise ValueError(f"{name}: at most {MAX_RESULTS} results")
@@ -194,7 +210,8 @@ def build(ti, lanes: int) -> SimpleNamespace:
     res = ti.field(ti.f64, MAX_RESULTS)  # a launch's reductions
     F1 = C.COEFS
     D1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
-    Ctx = context("EngineCtx", "x coef fr frame c nw spec")
+    Ctx = context("EngineCtx", "x coef fr frame c nw spec rec")
+    F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 
     @ti.func
     def _index(ctx: ti.template(), plane: ti.template()):
@@ -281,6 +298,11 @@ def build(ti, lanes: int) -> SimpleNamespace:
         """``array[k]`` (a coefficient, a launch scalar, a result)."""
         return array[k]
 
+    @ti.func
+    def _read2(array: ti.template(), j, k: ti.template()):
+        """``array[j, k]`` (a launch record's entry)."""
+        return array[j, k]
+
     # -- the pixel layout: (planes, H, W) arrays, one pixel per cell ---------------------------------
     @ti.func
     def _pixel_at(a: ti.template(), plane: ti.template(), di: ti.template(), dj: ti.template()):
@@ -334,11 +356,11 @@ def build(ti, lanes: int) -> SimpleNamespace:
         """What a stage sees of one cell: a lane vector of columns (element ``j``) or one pixel (column
         ``j``) of row ``i``. Its methods are the stages' vocabulary (module docstring)."""
 
-        __slots__ = ("ctx", "i", "j", "got")
+        __slots__ = ("ctx", "i", "j", "got", "step")
 
-        def __init__(self, ctx, i, j, got=()):
-            self.ctx, self.i, self.j, self.got = ctx, i, j, got  # got: the first results, read once per rows
-
+        def __init__(self, ctx, i, j, got=(), step=0):
+            self.ctx, self.i, self.j, self.got = ctx, i, j, got  # got: the first result, read once per rows
+            self.step = step  # the update of a solve
         @property
         def lane(self) -> bool:
             return self.ctx.spec.lane
@@ -384,6 +406,11 @@ def build(ti, lanes: int) -> SimpleNamespace:
             return (_lane_input if self.lane else _pixel_input)(self, polarity)
 
         @_dsl
+        def record(self, k: int):
+            """Column ``k`` of this update's row of the launch record (a solve's per-update coefficients)."""
+            return _read2(self.ctx.rec, self.step, k)
+
+        @_dsl
         def result(self, name: str):
             """An earlier stage's reduction ``name`` in this launch (float64)."""
             k = self.ctx.spec.launch.slot(name)
@@ -427,19 +454,30 @@ def build(ti, lanes: int) -> SimpleNamespace:
             W = ti.static(ctx.spec.W)
             start = ti.static(0.0 if kind == "sum" else LOWEST)
             a0, a1 = ti.f64(start), ti.f64(start)
-            p0, p1 = _read(res, 0), _read(res, 1)  # the earlier stages' results, final in this phase
+            m0, m1 = ti.f32(0.0), ti.f32(0.0)
+            p0 = _read(res, 0)  # the earlier stages' first result, final in this phase
             for i in range(i0, i1):
                 for e in range(1, (LANES + W - 1) // LANES + 1):
-                    if ti.static(n == 0):
-                        stage.fn(Cell(ctx, i, e, (p0, p1)))
+                    if ti.static(stage.residuals == 1):
+                        m0 = ti.max(m0, run_max(stage.fn(Cell(ctx, i, e, (p0,), j)) * C.lane_mask(e, W), LANES))
+                    elif ti.static(stage.residuals == 2):
+                        q0, q1 = stage.fn(Cell(ctx, i, e, (p0,), j))
+                        m0 = ti.max(m0, run_max(q0 * C.lane_mask(e, W), LANES))
+                        m1 = ti.max(m1, run_max(q1 * C.lane_mask(e, W), LANES))
+                    elif ti.static(n == 0):
+                        stage.fn(Cell(ctx, i, e, (p0,), j))
                     elif ti.static(n == 1):
-                        a0 = _combine(a0, _reduce_lane(stage.fn(Cell(ctx, i, e, (p0, p1))), e, W, kind), kind)
+                        a0 = _combine(a0, _reduce_lane(stage.fn(Cell(ctx, i, e, (p0,), j)), e, W, kind), kind)
                     else:
-                        r0, r1 = stage.fn(Cell(ctx, i, e, (p0, p1)))
+                        r0, r1 = stage.fn(Cell(ctx, i, e, (p0,), j))
                         a0 = _combine(a0, _reduce_lane(r0, e, W, kind), kind)
                         a1 = _combine(a1, _reduce_lane(r1, e, W, kind), kind)
                 for g in ti.static(stage.ghosts):
                     C.fill_ghosts(ctx.x, _index(ctx, g), i, 1, 1, W, stage.halo, ti.static(ctx.spec.border(g)[0]))
+            if ti.static(stage.residuals >= 1):
+                ti.atomic_max(sched.rbuf[j, 0], m0)
+            if ti.static(stage.residuals == 2):
+                ti.atomic_max(sched.rbuf[j, 1], m1)
             if ti.static(n >= 1):
                 _publish(ti.static(ctx.spec.launch.slot(stage.results[0])), a0, kind)
             if ti.static(n == 2):
@@ -448,11 +486,18 @@ def build(ti, lanes: int) -> SimpleNamespace:
         return run
 
     @ti.func
-    def _pixel_stage(ctx: ti.template(), stage: ti.template()):
-        """One parallel loop of ``stage`` over the pixels (the pixel layout)."""
+    def _pixel_stage(ctx: ti.template(), stage: ti.template(), step):
+        """One parallel loop of ``stage`` over the pixels (the pixel layout); an update's residuals are
+        maxed into the launch record's row ``step`` (columns 2..)."""
         n = ti.static(len(stage.results))
         for i, j in ti.ndrange(ctx.x.shape[1], ctx.x.shape[2]):
-            if ti.static(n == 0):
+            if ti.static(stage.residuals == 1):
+                ti.atomic_max(ctx.rec[step, 2], stage.fn(Cell(ctx, i, j, (), step)))
+            elif ti.static(stage.residuals == 2):
+                q0, q1 = stage.fn(Cell(ctx, i, j, (), step))
+                ti.atomic_max(ctx.rec[step, 2], q0)
+                ti.atomic_max(ctx.rec[step, 3], q1)
+            elif ti.static(n == 0):
                 stage.fn(Cell(ctx, i, j))
             elif ti.static(n == 1):
                 _publish(ti.static(ctx.spec.launch.slot(stage.results[0])), ti.cast(stage.fn(Cell(ctx, i, j)),
@@ -476,29 +521,58 @@ def build(ti, lanes: int) -> SimpleNamespace:
         for k in ti.static(range(len(spec.launch.results))):
             out[k] = res[k]
 
+    def _controls_of(launch: Launch):
+        """The scheduler's controls of ``launch``: workers, rows and, for a solve, its launch scalars."""
+        if launch.controls is None:
+            return _controls
+        n_at, tol_at, grow_at = launch.controls
+
+        @ti.func
+        def controls(ctx: ti.template()):
+            fr = ti.static(ctx.fr)
+            return ctx.nw, ctx.x.shape[1], ti.cast(fr[n_at], ti.i32), fr[tol_at], fr[grow_at]
+
+        return controls
+
+    @ti.func
+    def _residuals(spec: ti.template(), rec: ti.template()):
+        if ti.static(spec.launch.fields > 0):
+            sched.residuals_to(rec, spec.launch.fields)
+
     @functools.lru_cache(maxsize=None)
     def kernel(launch: Launch, lane: bool, W: int, modes: tuple):
-        """The kernel of ``launch`` for one layout: ``run(x, coef, fr, frame, c, nw, out)`` (``x``: the stacked
-        planes, lane array or (planes, H, W); ``frame``: the input, (H, W) or an event bin (2, H, W);
-        ``c``: the pairs' parity; ``nw``: workers (lane layout); ``out``: the results, float64)."""
+        """The kernel of ``launch`` for one layout: ``run(x, coef, fr, frame, c, nw, out, rec)`` (``x``: the
+        stacked planes, lane array or (planes, H, W); ``frame``: the input, (H, W) or an event bin (2, H, W);
+        ``c``: the pairs' parity; ``nw``: workers (lane layout); ``out``: the results, float64; ``rec``: the
+        launch record of a solve, :class:`~cdnf_ti.kernels.common.LaunchRecord`).
+
+        The pixel layout's kernel takes two more arguments, ``part`` (``"all"``, or ``"before"``, ``"update"``,
+        ``"after"``: the stages it runs) and ``step`` (the update): the backend runs a solve's updates one
+        launch each."""
         spec = Layout(launch, lane, W, modes)
         if lane:
-            run_plan = workers(Plan(after=tuple(_row_stage(s) for s in launch.stages), controls=_controls))
+            run_plan = workers(Plan(before=tuple(_row_stage(s) for s in launch.before),
+                                    update=tuple(_row_stage(s) for s in launch.update),
+                                    after=tuple(_row_stage(s) for s in launch.stages), controls=_controls_of(launch)))
 
             @ti.kernel
             def run_lanes(x: C.LANE3, coef: F1, fr: F1, frame: ti.types.ndarray(), c: ti.i32, nw: ti.i32,
-                          out: D1):
+                          out: D1, rec: F2):
                 _start(spec)
-                run_plan(ti.static(Ctx(x, coef, fr, frame, c, nw, spec)))
+                run_plan(ti.static(Ctx(x, coef, fr, frame, c, nw, spec, rec)))
                 _finish(spec, out)
+                _residuals(spec, rec)
 
             return vector_kernel(run_lanes)
 
         @ti.kernel
-        def run_pixels(x: C.F3, coef: F1, fr: F1, frame: ti.types.ndarray(), c: ti.i32, nw: ti.i32, out: D1):
-            _start(spec)
-            for s in ti.static(launch.stages):
-                _pixel_stage(ti.static(Ctx(x, coef, fr, frame, c, nw, spec)), s)
+        def run_pixels(x: C.F3, coef: F1, fr: F1, frame: ti.types.ndarray(), c: ti.i32, nw: ti.i32, out: D1,
+                       rec: F2, part: ti.template(), step: ti.i32):
+            if ti.static(part in ("all", "before")):
+                _start(spec)
+            for s in ti.static({"all": launch.before + launch.stages, "before": launch.before,
+                                "update": launch.update, "after": launch.stages}[part]):
+                _pixel_stage(ti.static(Ctx(x, coef, fr, frame, c, nw, spec, rec)), s, step)
             _finish(spec, out)
 
         return scalar_kernel(run_pixels)

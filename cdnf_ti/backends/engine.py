@@ -8,11 +8,12 @@ and runs a launch with :meth:`Backend.launch`. The model's control (its ``_step`
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
 from ..kernels import engine
+from ..kernels.common import LaunchRecord
 from ..kernels.schedule import MAX_WORKERS
 from ..taichi_runtime import cpu_threads, dsl, ensure_taichi, kernels, lanes
 from .workspace import Scratch, event_bin
@@ -52,6 +53,8 @@ class Backend:
         self.coef.from_numpy(self.coefs)
         self.fr = np.zeros(self.M.scalars.count, np.float32)
         self.out = np.zeros(engine.MAX_RESULTS)
+        self.record = LaunchRecord(2)  # the launches' (unused) record
+        self.records: dict[str, LaunchRecord] = {}  # each solve's per-update coefficients in, residuals out
         self.nw = min(cpu_threads(), MAX_WORKERS)
         self.lock = Scratch.get().lock  # the engine's scratch is one per process (Model.step holds it)
         self.frame: np.ndarray = np.zeros((H, W), np.float32)
@@ -83,15 +86,46 @@ class Backend:
         """Keep an event bin (``p_on``, ``p_off``: (H, W) each) as the input of the next launches."""
         self.frame = event_bin(p_on, p_off)
 
-    def launch(self, name: str, **values: float) -> tuple[float, ...]:
-        """Set the launch scalars ``values`` (by name; the others keep their last values), run the launch
-        ``name`` and return its results in the order its stages declare them."""
+    def _kernel(self, name: str, values: dict) -> tuple[Any, Any]:
         for k, v in values.items():
             self.fr[getattr(self.M.scalars, k).slot] = v
         launch = self.M.launches[name]
-        run = self.M.engine.kernel(launch, self.lane, self.shape[1] if self.lane else 0, self.modes)
-        run(self.x, self.coef, self.fr, self.frame, self.parity, self.nw, self.out)
+        return launch, self.M.engine.kernel(launch, self.lane, self.shape[1] if self.lane else 0, self.modes)
+
+    def _run(self, run: Any, record: LaunchRecord, *part: Any) -> None:
+        run(self.x, self.coef, self.fr, self.frame, self.parity, self.nw, self.out, record.array, *part)
+
+    def launch(self, name: str, **values: float) -> tuple[float, ...]:
+        """Set the launch scalars ``values`` (by name; the others keep their last values), run the launch
+        ``name`` and return its results in the order its stages declare them."""
+        launch, run = self._kernel(name, values)
+        self._run(run, self.record, *(() if self.lane else ("all", 0)))
         return tuple(float(v) for v in self.out[:len(launch.results)])
+
+    def solve(self, name: str, coefs: Sequence[tuple[float, ...]], updates: int, tol: float, grow: float,
+              **values: float) -> tuple[list[tuple[float, ...]], tuple[float, ...]]:
+        """Run the solve launch ``name``: at most ``updates`` (<= ``len(coefs)``) updates, update ``j`` with its
+        record coefficients ``coefs[j]`` (``a.record(0)``, ``a.record(1)``), stopping once every residual is
+        ``<= tol`` or one grows past ``grow`` times the best. Returns the residuals of the updates run and
+        the launch's results (its ``stages`` run only when the solve converged)."""
+        launch, run = self._kernel(name, dict(values, updates=updates, tol=tol, grow=grow))
+        record = self.records.setdefault(name, LaunchRecord(launch.fields))
+        record.start(coefs)
+        if self.lane:
+            self._run(run, record)
+        else:  # one launch per update, gated here as the scheduler gates them
+            self._run(run, record, "before", 0)
+            best = np.inf
+            for j in range(min(updates, len(coefs))):
+                self._run(run, record, "update", j)
+                r = float(record.array[j, 2:2 + launch.fields].max())
+                if r <= tol or r > grow * best:
+                    break
+                best = min(best, r)
+            done = record.residuals(updates)
+            if done and max(done[-1]) <= tol:
+                self._run(run, record, "after", 0)
+        return record.residuals(updates), tuple(float(v) for v in self.out[:len(launch.results)])
 
     def fields(self) -> dict[str, np.ndarray]:
         """Every plane (a pair's ``now`` buffer) of the last frame, (H, W) each, by name."""
