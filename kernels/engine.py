@@ -136,12 +136,12 @@ class Stage:
     planes in ``ghosts`` refreshed after each row (lane layout; ``halo`` columns). An update stage of a
     solve returns ``residuals`` (1 or 2) values instead, maxed per update (:class:`Launch`)."""
 
-    def __init__(self, fn, sums: str = "", maxes: str = "", ghosts=(), halo: int = 1, residuals: int = 0):
+    def __init__(self, fn, sums: str = "", maxes: str = "", ghosts=(), halo: "int | str" = 1, residuals: int = 0):
         if sums and maxes:
             raise ValueError("a stage reduces by one kind (sums or maxes)")
         if residuals and (sums or maxes or residuals > 2):
             raise ValueError("an update stage returns its 1 or 2 residuals only")
-        self.fn, self.ghosts, self.halo, self.residuals = fn, tuple(ghosts), int(halo), int(residuals)
+        self.fn, self.ghosts, self.halo, self.residuals = fn, tuple(ghosts), halo, int(residuals)
         self.results = tuple((sums or maxes).split())
         self.kind = "max" if maxes else "sum"
         if len(self.results) > 2:
@@ -178,10 +178,15 @@ class Launch:
 
 class Layout:
     """The compile-time choices of a launch's kernel: lane layout or not, frame width (lanes), the border
-    of every plane (``modes``: slot -> (mode, ring)), the launch."""
+    of every plane (``modes``: slot -> (mode, ring)), the model's compile-time options (``options``:
+    ``(name, value)`` pairs, e.g. a stencil's radius), the launch."""
 
-    def __init__(self, launch: Launch, lane: bool, W: int, modes: tuple):
-        self.launch, self.lane, self.W, self.modes = launch, lane, W, dict(modes)
+    def __init__(self, launch: Launch, lane: bool, W: int, modes: tuple, options: tuple = ()):
+        self.launch, self.lane, self.W, self.modes, self.options = launch, lane, W, dict(modes), dict(options)
+
+    def halo(self, stage: "Stage") -> int:
+        """The ghost columns ``stage`` refreshes: its ``halo``, a number or the name of an option."""
+        return self.options[stage.halo] if isinstance(stage.halo, str) else stage.halo
 
     def border(self, plane: Plane) -> tuple[int, bool]:
         return self.modes.get(plane.slot, (REPLICATE, False))
@@ -396,6 +401,11 @@ def build(ti, lanes: int) -> SimpleNamespace:
             return _read(self.ctx.fr, s.slot)
 
         @_dsl
+        def option(self, name: str):
+            """The model's compile-time option ``name`` (a Python value: use it in ``ti.static``)."""
+            return self.ctx.spec.options[name]
+
+        @_dsl
         def grey(self):
             """The input frame here (float32, as stored: grey levels or [0, 1])."""
             return (_lane_input if self.lane else _pixel_input)(self, 0)
@@ -473,7 +483,8 @@ def build(ti, lanes: int) -> SimpleNamespace:
                         a0 = _combine(a0, _reduce_lane(r0, e, W, kind), kind)
                         a1 = _combine(a1, _reduce_lane(r1, e, W, kind), kind)
                 for g in ti.static(stage.ghosts):
-                    C.fill_ghosts(ctx.x, _index(ctx, g), i, 1, 1, W, stage.halo, ti.static(ctx.spec.border(g)[0]))
+                    C.fill_ghosts(ctx.x, _index(ctx, g), i, 1, 1, W, ti.static(ctx.spec.halo(stage)),
+                                  ti.static(ctx.spec.border(g)[0]))
             if ti.static(stage.residuals >= 1):
                 ti.atomic_max(sched.rbuf[j, 0], m0)
             if ti.static(stage.residuals == 2):
@@ -540,7 +551,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
             sched.residuals_to(rec, spec.launch.fields)
 
     @functools.lru_cache(maxsize=None)
-    def kernel(launch: Launch, lane: bool, W: int, modes: tuple):
+    def kernel(launch: Launch, lane: bool, W: int, modes: tuple, options: tuple = ()):
         """The kernel of ``launch`` for one layout: ``run(x, coef, fr, frame, c, nw, out, rec)`` (``x``: the
         stacked planes, lane array or (planes, H, W); ``frame``: the input, (H, W) or an event bin (2, H, W);
         ``c``: the pairs' parity; ``nw``: workers (lane layout); ``out``: the results, float64; ``rec``: the
@@ -549,7 +560,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
         The pixel layout's kernel takes two more arguments, ``part`` (``"all"``, or ``"before"``, ``"update"``,
         ``"after"``: the stages it runs) and ``step`` (the update): the backend runs a solve's updates one
         launch each."""
-        spec = Layout(launch, lane, W, modes)
+        spec = Layout(launch, lane, W, modes, options)
         if lane:
             run_plan = workers(Plan(before=tuple(_row_stage(s) for s in launch.before),
                                     update=tuple(_row_stage(s) for s in launch.update),

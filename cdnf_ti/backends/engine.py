@@ -26,7 +26,8 @@ class Backend:
     ----------
     model : Model
         Reads ``kernels`` (its kernel module), ``coefficients()`` (a dict by coefficient name),
-        ``borders()`` (plane name -> border, optional), ``fast`` (use the lane layout where it applies).
+        ``borders()`` (plane name -> border, optional), ``kernel_options()`` (compile-time values by name,
+        optional: ``a.option(name)`` in a stage), ``fast`` (use the lane layout where it applies).
     shape : (H, W)
     arch : str
         ``cpu``: the lane layout for frames at least two lane vectors wide; else the pixel layout.
@@ -41,6 +42,7 @@ class Backend:
         self.shape = H, W = tuple(int(s) for s in shape)
         self.lane = getattr(model, "fast", True) and arch == "cpu" and W >= 2 * lanes()
         self.modes = engine.borders(self.M.planes, model.borders() if hasattr(model, "borders") else {})
+        self.options = tuple(sorted(model.kernel_options().items())) if hasattr(model, "kernel_options") else ()
         n = self.M.planes.count
         if self.lane:
             C = kernels("common")
@@ -90,7 +92,8 @@ class Backend:
         for k, v in values.items():
             self.fr[getattr(self.M.scalars, k).slot] = v
         launch = self.M.launches[name]
-        return launch, self.M.engine.kernel(launch, self.lane, self.shape[1] if self.lane else 0, self.modes)
+        return launch, self.M.engine.kernel(launch, self.lane, self.shape[1] if self.lane else 0, self.modes,
+                                              self.options)
 
     def _run(self, run: Any, record: LaunchRecord, *part: Any) -> None:
         run(self.x, self.coef, self.fr, self.frame, self.parity, self.nw, self.out, record.array, *part)
