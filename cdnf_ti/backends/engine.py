@@ -126,8 +126,8 @@ class Backend:
                     break
                 best = min(best, r)
             done = record.residuals(updates)
-            if done and max(done[-1]) <= tol:
-                self._run(run, record, "after", 0)
+            if done and max(done[-1]) <= tol:  # the after stages' step: the updates run (as on the lane layout)
+                self._run(run, record, "after", len(done))
         return record.residuals(updates), tuple(float(v) for v in self.out[:len(launch.results)])
 
     def fields(self) -> dict[str, np.ndarray]:
