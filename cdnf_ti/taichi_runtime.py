@@ -382,7 +382,8 @@ def lanes() -> int:
 def kernels(name):
     """The kernels of ``kernels/<name>.py`` (``"cdnf"``, ``"lgmd"``, ``"sdnf"``, ``"stimuli"``, ``"common"``),
     built for this process's compiler and lane count on first use (the module's ``build(ti, lanes)``);
-    ``name`` may also be a ``build(ti, lanes)`` function itself (a model defined outside the package).
+    ``name`` may also be a ``build(ti, lanes)`` function itself (a model defined outside the package), or
+    ``"<module>:<function>"``, a build function of a module that holds several models (``"lgmd:lgmd1"``).
 
     The kernel modules define their kernels in that factory, so importing them loads no compiler; this
     is the one place that builds them, once per process (a second model compiles nothing new).
@@ -392,7 +393,9 @@ def kernels(name):
         got = _built.get(name)
         if got is None:
             ti = dsl()
-            build = name if callable(name) else importlib.import_module(f"{__package__}.kernels.{name}").build
+            module, _, function = ("" if callable(name) else name).partition(":")
+            build = name if callable(name) else getattr(importlib.import_module(f"{__package__}.kernels.{module}"),
+                                                        function or "build")
             got = _built[name] = build(ti, lanes())
         return got
 
