@@ -1,7 +1,7 @@
 """The lane-vectorised fast paths of LGMD1, LGMD2 and F-LGMD against the NumPy float64 references.
 
-Every kernel of the fast paths (``kernels/lgmd.py``: ``lgmd_lanes_load``,
-``lgmd1_lanes_layers``, ``lgmd2_lanes_layers``, ``flgmd_lanes_*``) is checked against
+Every launch of the fast paths (``kernels/lgmd.py``: each model's ``load`` and ``layers``, F-LGMD's
+``solve`` and ``finish``, on the engine's lane layout) is checked against
 :mod:`cdnf_ti.baselines_reference` on generated stimuli (basic, noisy, dashcam-like
 stand-in video and, when the development clips are there, a real clip), at widths that are and
 are not multiples of the lane width; F-LGMD's solve converging inside its launch and
@@ -15,14 +15,6 @@ from conftest import small_stimulus
 from test_flgmd import noisy_stream
 from test_row_runs import moving_noise
 
-from cdnf_ti.backends.lgmd import (
-    LaneTaichiFLGMDBackend,
-    LaneTaichiLGMD1Backend,
-    LaneTaichiLGMD2Backend,
-    TaichiFLGMDBackend,
-    TaichiLGMD1Backend,
-    TaichiLGMD2Backend,
-)
 from cdnf_ti.bench.inputs import real_or_standin, standin_video
 from cdnf_ti.models import FLGMDParams, create_model
 from cdnf_ti.models.flgmd import FEEDBACK_STARTS
@@ -30,11 +22,14 @@ from cdnf_ti.taichi_runtime import lanes
 
 ALWAYS_ON = FLGMDParams(t_ffi=1e9)  # no FFI hold: the per-pixel layers run on every frame
 FAST_MODELS = ["lgmd1", "lgmd2", "flgmd_onn"]
-LANE_BACKEND = {"lgmd1": LaneTaichiLGMD1Backend, "lgmd2": LaneTaichiLGMD2Backend, "flgmd_onn": LaneTaichiFLGMDBackend}
-GENERIC_BACKEND = {"lgmd1": TaichiLGMD1Backend, "lgmd2": TaichiLGMD2Backend, "flgmd_onn": TaichiFLGMDBackend}
 STEPS = {"lgmd1": "sum_G", "lgmd2": "max_Ce", "flgmd_onn": "iterations"}  # a per-frame diagnostic of the layers
 
 LANES = lanes()  # lanes per vector element of the fast path under this process's compiler
+
+
+def on_lane_layout(be) -> bool:
+    """Whether a model's backend runs the fast (lane) layout; False: the pixel layout (generic kernels)."""
+    return be.lane
 
 
 def default_params(model):
@@ -44,7 +39,7 @@ def default_params(model):
 def run_fast_and_reference(frames, params=None, model="flgmd_onn"):
     fast, ref = create_model(model, params), create_model(model, params, backend="numpy")
     a, b = fast.run(frames), ref.run(frames)
-    assert isinstance(fast._be, LANE_BACKEND[model])
+    assert on_lane_layout(fast._be)
     return fast, a, ref, b
 
 
@@ -117,7 +112,7 @@ def test_fast_path_plain_scheme_matches_reference():
 
 def test_unconverged_launches_finish_the_layers_in_a_separate_kernel():
     # With a budget of 2 updates the solve launch never converges, so the layers come from
-    # flgmd_lanes_finish instead of the solve launch; both backends run the same 2 updates.
+    # the finish launch instead of the solve launch; both backends run the same 2 updates.
     p = FLGMDParams(max_iter=2, t_ffi=1e9)
     frames = noisy_stream("light_looming", seed=11, h=40, w=70)
     with pytest.warns(Warning):
@@ -160,20 +155,18 @@ def test_fast_and_generic_kernels_give_the_same_trace(model):
     generic_model = create_model(model)
     generic_model.fast = False
     generic = generic_model.run(frames)
-    assert isinstance(generic_model._be, GENERIC_BACKEND[model])
+    assert not on_lane_layout(generic_model._be)
     np.testing.assert_allclose(fast.output, generic.output, atol=1e-6, rtol=0)
     np.testing.assert_allclose(fast.diagnostics[STEPS[model]], generic.diagnostics[STEPS[model]], rtol=1e-5)
 
 
-def feedback_iterate_start(model):
-    """The ON/OFF iterate of a Taichi F-LGMD backend after ``load`` and ``prepare``, as (H, W) arrays."""
-    be = model._be
-    if isinstance(be, LaneTaichiFLGMDBackend):
-        ws = be._acquire()
-        st = ws.state.to_numpy()
-        return ws.frame(st[be._on(be.iterate[0])]), ws.frame(st[be._off(be.iterate[1])])
-    st = be.st.to_numpy()
-    return st[be.on[be.c]], st[be.off[be.c]]
+def feedback_iterate_start(model, frame):
+    """The ON/OFF iterate's start of a Taichi F-LGMD model after the load of ``frame`` (a frame after the
+    first), as (H, W) arrays: the planes ``X_on``, ``X_off`` that the load launch writes."""
+    model._be.load(frame, False)
+    model._input(1, frame, None)
+    planes = model._be.fields()
+    return planes["X_on"], planes["X_off"]
 
 
 @pytest.mark.parametrize("start", FEEDBACK_STARTS)
@@ -185,11 +178,10 @@ def test_feedback_iteration_starts_where_the_reference_starts(fast, start):
     model.fast = fast
     model.run(frames[:-1])
     ref.run(frames[:-1])
-    assert isinstance(model._be, LANE_BACKEND["flgmd_onn"] if fast else GENERIC_BACKEND["flgmd_onn"])
-    for m in (model, ref):
-        m._be.load(frames[-1], False)
-        m._be.prepare()
-    on, off = feedback_iterate_start(model)
+    assert on_lane_layout(model._be) is fast
+    ref._be.load(frames[-1], False)
+    ref._be.prepare()
+    on, off = feedback_iterate_start(model, frames[-1])
     rb = ref._be
     np.testing.assert_allclose(on, rb.ON, atol=1e-3, rtol=1e-5)
     np.testing.assert_allclose(off, rb.OFF, atol=1e-3, rtol=1e-5)
@@ -201,7 +193,12 @@ def test_feedback_iteration_starts_where_the_reference_starts(fast, start):
 def test_narrow_frames_fall_back_to_generic_kernels(model):
     m = create_model(model)
     m.run(moving_noise(6, 20, seed=1, n=2))
-    assert isinstance(m._be, GENERIC_BACKEND[model])
+    assert not on_lane_layout(m._be)
+
+
+def own_state_shared_scratch(a, b) -> bool:
+    """Whether two backends hold their own state arrays and share the process's scratch (its lock)."""
+    return a.x is not b.x and a.lock is b.lock
 
 
 @pytest.mark.parametrize("model", FAST_MODELS)
@@ -215,7 +212,7 @@ def test_interleaved_models_of_one_size_keep_their_own_state(model):
     for x, y in zip(fa, fb):
         out_a.append(ma.step(x).output)
         out_b.append(mb.step(y).output)
-    assert ma._be.ws is not mb._be.ws and ma._be.ws.sync is mb._be.ws.sync  # own state, shared scratch
+    assert own_state_shared_scratch(ma._be, mb._be)
     assert np.array_equal(np.array(out_a), alone_a)
     assert np.array_equal(np.array(out_b), alone_b)
     assert np.abs(alone_a - alone_b).max() > 1e-4  # the two streams really differ

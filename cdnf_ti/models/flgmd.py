@@ -49,13 +49,15 @@ import numpy as np
 
 from ..baselines_reference import NumpyFLGMDBackend
 from ..params import ModelParams, check_params, contrast_kernel, kernel_spectrum
-from ..solver import solve_fixed_point
+from ..solver import RESTART_GROWTH, solve_fixed_point
 from .lgmd1 import LGMD1, LGMD1Params, lgmd1_checks
 from .lgmd2 import lowpass_coefficient
 from .registry import register_model
 
 #: Where the feedback iteration starts each frame (:attr:`FLGMDParams.start`).
 FEEDBACK_STARTS = ("local", "drive")
+#: Updates per solve launch at most (the engine's launch record holds 32).
+UPDATES_PER_LAUNCH = 32
 
 
 @dataclass(frozen=True)
@@ -250,6 +252,23 @@ class FLGMDONn(LGMD1):
                    "solved as a fixed point -- RECONSTRUCTION")
 
     numpy_backend_type = NumpyFLGMDBackend
+    #: The stages (``kernels/lgmd.py``): the load, the feedback solve and the layers at its fixed point.
+    kernels = "lgmd:flgmd"
+    #: The planes that :meth:`fields` leaves out (the solve's scratch).
+    hidden = ("L", "ON0", "OFF0", "Q_on", "Q_off", "X_on", "Y_on", "X_off", "Y_off")
+
+    def coefficients(self) -> dict[str, object]:
+        """The stages' coefficients by name (``kernels/lgmd.py``, ``FLGMD_COEFS``)."""
+        p, dt = self.params, self.dt
+        a = self._lowpass(dt, p.tau_lateral)
+        w_on, w_off = p.feedback_stencils(dt)
+        start_on, start_off = p.local_start_gains(dt)
+        q_on, q_off = ([w * k * (1.0 - x) for k, x in zip(p.k_lateral, a)] for w in (p.w_i_on, p.w_i_off))
+        return dict(clip=p.clip, dc=p.dc, q_on=q_on, q_off=q_off, start_on=start_on, start_off=start_off,
+                    w_on=w_on, w_off=w_off, beta=(p.beta_on, p.beta_off), t_s=p.t_s)
+
+    def _keep_channels(self, loaded: object) -> None:
+        """The settled channels are written only at a fixed point: a frame without one keeps them."""
 
     def _diag0(self) -> dict[str, float]:
         d = super()._diag0()
@@ -267,10 +286,33 @@ class FLGMDONn(LGMD1):
     def _run_layers(self) -> tuple[float, dict[str, float], bool]:
         p = self.params
         be = self._be
-        be.prepare()
-        rep = solve_fixed_point(be.feedback_iterate, 2, tol=p.tol, max_iter=p.max_iter, damping=p.damping,
+        if self.backend_name == "numpy":
+            be.prepare()
+            iterate, many, steps = be.feedback_iterate, None, 1
+        else:
+            self._ran, self._sum_g = 0, None
+            iterate, many, steps = self._iterate, self._iterate_many, UPDATES_PER_LAUNCH
+        rep = solve_fixed_point(iterate, 2, tol=p.tol, max_iter=p.max_iter, damping=p.damping,
                                 min_damping=p.min_damping, stall_patience=p.stall_patience, bounds=self._bounds,
-                                steps=getattr(be, "steps", 1), iterate_many=getattr(be, "feedback_iterate_many", None))
-        sum_g = be.finish()
+                                steps=steps, iterate_many=many)
+        if self.backend_name == "numpy":
+            sum_g = be.finish()
+        else:  # a solve launch that converged computed the layers; else the finish launch does
+            sum_g = self._sum_g if self._sum_g is not None else be.launch("finish", ran=self._ran)[0]
         extra = dict(iterations=max(rep.iterations), residual_on=rep.residuals[0], residual_off=rep.residuals[1])
         return sum_g, extra, rep.converged
+
+    def _iterate(self, lam: float, mom: float = 0.0) -> tuple[float, float]:
+        """One update of the feedback solve; returns the residuals of ON and OFF before it."""
+        return self._iterate_many([(lam, mom)])[0]
+
+    def _iterate_many(self, coefs: list[tuple[float, float]]) -> list[tuple[float, float]]:
+        """The updates ``coefs`` (``(lam, mom)`` each) in one solve launch, stopping after the first whose
+        residuals are both ``<= tol``; that launch also computes the layers at the fixed point (``_sum_g``)."""
+        p = self.params
+        tol = float(np.float32(p.tol))  # the kernels' float32 tolerance
+        res, (sum_g,) = self._be.solve("solve", coefs, len(coefs), tol, RESTART_GROWTH,
+                                        with_off=float(p.beta_off != 0.0), ran=float(self._ran))
+        self._ran += len(res)
+        self._sum_g = sum_g if res and max(res[-1]) <= tol else None
+        return res

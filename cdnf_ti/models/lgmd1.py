@@ -133,10 +133,20 @@ class LGMD1(LGMDFamily):
     description = "LGMD1 with ON/OFF pathways and SFA (Fu et al. 2018); equations from the authors' code"
 
     numpy_backend_type = NumpyLGMD1Backend
+    #: The stages (``kernels/lgmd.py``).
+    kernels = "lgmd:lgmd1"
 
-    def _step(self, t: int, grey: np.ndarray | None, sum_p: float) -> StepResult:
+    def coefficients(self) -> dict[str, Any]:
+        """The stages' coefficients by name (``kernels/lgmd.py``, ``LGMD1_COEFS``)."""
         p = self.params
+        return dict(clip=p.clip, dc=p.dc, k=p.k_lateral, a=self._lowpass(self.dt, p.tau_lateral),
+                    w_i=(p.w_i_on, p.w_i_off), e=(p.w_on_exc, p.w_off_exc, p.w_onoff), t_s=p.t_s)
+
+    def _step(self, t: int, grey: np.ndarray | None, loaded: Any) -> StepResult:
+        p = self.params
+        sum_p = self._input(t, grey, loaded)
         if t == 0 and grey is not None:  # an event bin (grey None) is a full step even at t == 0
+            self._keep_channels(loaded)
             return StepResult(t, 0.5, False, True, self._diag0())
         n_cells = self._be.shape[0] * self._be.shape[1]
         self._track_pm(sum_p, n_cells, p.tau_ffi)
@@ -145,6 +155,7 @@ class LGMD1(LGMDFamily):
         converged = True
         if held:
             # held at rest; the per-pixel layers are not computed (ON/OFF keep their values)
+            self._keep_channels(loaded)
             k, kh, sum_g = 0.5, p.kh_floor, 0.0
             self.k_prev, self.kh_prev = k, kh
         else:
@@ -163,4 +174,6 @@ class LGMD1(LGMDFamily):
 
     def _run_layers(self) -> tuple[float, dict[str, float], bool]:
         """Per-pixel stages of one frame: ``(sum G, extra diagnostics, converged)``."""
-        return self._be.layers(), {}, True
+        if self.backend_name == "numpy":
+            return self._be.layers(), {}, True
+        return self._be.launch("layers")[0], {}, True

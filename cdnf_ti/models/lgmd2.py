@@ -213,8 +213,35 @@ class LGMDFamily(Model):
     def _setup(self) -> None:
         self.dt = frame_interval_ms(self.fps)
 
-    #: Use the fast backend where it applies; ``False``: the generic kernels (same equations).
+    #: Use the fast (lane) layout where it applies; ``False``: the pixel layout (same equations).
     fast: bool = True
+
+    def _input(self, t: int, grey: np.ndarray | None, loaded: Any) -> float:
+        """``sum |P|`` of frame ``t`` (an event bin: ``sum (P_on + P_off)``): what the ``numpy`` backend's ``load``
+        returned, else the kernels' ``load`` launch, which writes the frame's ON / OFF channels into the pairs'
+        other buffers (:meth:`_keep_channels` drops them)."""
+        if loaded is not None:
+            return loaded
+        self._be.flip()
+        scale = 1.0 if grey is not None and grey.dtype == np.uint8 else 255.0
+        return self._be.launch("load", scale=scale, keep=0.0 if t == 0 else 1.0)[0]
+
+    def _keep_channels(self, loaded: Any) -> None:
+        """A frame whose layers do not run (the first, an FFI-held one) drops its ON / OFF channels."""
+        if loaded is None:
+            self._be.flip()
+
+    #: The planes that :meth:`fields` leaves out.
+    hidden: tuple[str, ...] = ("L",)
+
+    def fields(self) -> dict[str, np.ndarray]:
+        """The layers (those in :attr:`hidden` aside), (H, W) each."""
+        return {k: v for k, v in super().fields().items() if k not in self.hidden}
+
+    @staticmethod
+    def _lowpass(dt: int, taus: Sequence[float]) -> list[float]:
+        """``a = dt / (dt + tau)`` of each delay ``tau``."""
+        return [lowpass_coefficient(dt, tau) for tau in taus]
 
     def _numpy_backend(self, shape: tuple[int, int]) -> Any:
         return self.numpy_backend_type(self.params, shape, self.dt)
@@ -278,11 +305,22 @@ class LGMD2(LGMDFamily):
     description = "LGMD2 (Fu et al. 2020): biased ON/OFF, adaptive inhibition, SFA; equations from the authors' code"
 
     numpy_backend_type = NumpyLGMD2Backend
+    #: The stages (``kernels/lgmd.py``).
+    kernels = "lgmd:lgmd2"
 
-    def _step(self, t: int, grey: np.ndarray | None, sum_p: float) -> StepResult:
+    def coefficients(self) -> dict[str, Any]:
+        """The stages' coefficients by name (``kernels/lgmd.py``, ``LGMD2_COEFS``)."""
+        p = self.params
+        return dict(clip=p.clip, dc=p.dc, k_on=p.k_on, a_on=self._lowpass(self.dt, p.tau_on), k_off=p.k_off,
+                    a_off=self._lowpass(self.dt, p.tau_off), e=(p.w_on_exc, p.w_off_exc, p.w_onoff),
+                    delta_c=p.delta_c, c_w=p.c_w, c_de=p.c_de, t_de=p.t_de)
+
+    def _step(self, t: int, grey: np.ndarray | None, loaded: Any) -> StepResult:
         p = self.params
         be = self._be
+        sum_p = self._input(t, grey, loaded)
         if t == 0 and grey is not None:  # an event bin (grey None) is a full step even at t == 0
+            self._keep_channels(loaded)
             return StepResult(t, 0.5, False, True, dict(Kh=p.kh_floor, n=0, count=0, PM=0.0,
                                                         w_on=p.w_on_base, w_off=p.w_off_base,
                                                         sum_G=0.0, max_Ce=0.0))
@@ -290,7 +328,10 @@ class LGMD2(LGMDFamily):
         self._track_pm(sum_p, n_cells, p.tau_pm)
         w_on = max(self.pm / p.t_pm, p.w_on_base)
         w_off = max(self.pm / p.t_pm, p.w_off_base)
-        sum_g, max_ce = be.layers(w_on, w_off)
+        if self.backend_name == "numpy":
+            sum_g, max_ce = be.layers(w_on, w_off)
+        else:
+            max_ce, sum_g = be.launch("layers", w_on=w_on, w_off=w_off)
         k, kh = self._membrane(sum_g, n_cells)
         n, alert = self._spikes(kh)
         diag = dict(Kh=kh, n=n, count=self.count, PM=self.pm, w_on=w_on, w_off=w_off,
