@@ -464,16 +464,16 @@ def build(ti, lanes: int) -> SimpleNamespace:
             W = ti.static(ctx.spec.W)
             start = ti.static(0.0 if kind == "sum" else LOWEST)
             a0, a1 = ti.f64(start), ti.f64(start)
-            m0, m1 = ti.f32(0.0), ti.f32(0.0)
+            m0, m1 = _lane_zeros(), _lane_zeros()  # an update's residuals, maxed as vectors, reduced once
             p0 = _read(res, 0)  # the earlier stages' first result, final in this phase
             for i in range(i0, i1):
                 for e in range(1, (LANES + W - 1) // LANES + 1):
                     if ti.static(stage.residuals == 1):
-                        m0 = ti.max(m0, run_max(stage.fn(Cell(ctx, i, e, (p0,), j)) * C.lane_mask(e, W), LANES))
+                        m0 = ti.max(m0, stage.fn(Cell(ctx, i, e, (p0,), j)) * C.lane_mask(e, W))
                     elif ti.static(stage.residuals == 2):
                         q0, q1 = stage.fn(Cell(ctx, i, e, (p0,), j))
-                        m0 = ti.max(m0, run_max(q0 * C.lane_mask(e, W), LANES))
-                        m1 = ti.max(m1, run_max(q1 * C.lane_mask(e, W), LANES))
+                        m0 = ti.max(m0, q0 * C.lane_mask(e, W))
+                        m1 = ti.max(m1, q1 * C.lane_mask(e, W))
                     elif ti.static(n == 0):
                         stage.fn(Cell(ctx, i, e, (p0,), j))
                     elif ti.static(n == 1):
@@ -486,9 +486,9 @@ def build(ti, lanes: int) -> SimpleNamespace:
                     C.fill_ghosts(ctx.x, _index(ctx, g), i, 1, 1, W, ti.static(ctx.spec.halo(stage)),
                                   ti.static(ctx.spec.border(g)[0]))
             if ti.static(stage.residuals >= 1):
-                ti.atomic_max(sched.rbuf[j, 0], m0)
+                ti.atomic_max(sched.rbuf[j, 0], run_max(m0, LANES))
             if ti.static(stage.residuals == 2):
-                ti.atomic_max(sched.rbuf[j, 1], m1)
+                ti.atomic_max(sched.rbuf[j, 1], run_max(m1, LANES))
             if ti.static(n >= 1):
                 _publish(ti.static(ctx.spec.launch.slot(stage.results[0])), a0, kind)
             if ti.static(n == 2):
