@@ -1,5 +1,5 @@
-"""Row runs (kernels/common.py): the comparison models match their float64 references on frame
-sizes around the run lengths (16- and 4-column runs, single border columns, the smallest 2x2 frames)."""
+"""Small and odd frame sizes: the comparison models match their float64 references on frames a few
+columns wide (single border columns, the smallest 2x2 frames), which run on the pixel layout."""
 
 import numpy as np
 import pytest
