@@ -108,14 +108,18 @@ def _family(ti, lanes: int) -> SimpleNamespace:
         return (k0 * (a0 * c + (1.0 - a0) * cp) + k1 * (a1 * e + (1.0 - a1) * ep)
                 + k2 * (a2 * d + (1.0 - a2) * dp))
 
-    @ti.func
-    def mean9(a: ti.template(), x: ti.template()):
-        """The 3x3 mean of plane ``x``."""
-        c, e, d = a.window3(x)
-        return (1.0 / 9.0) * c + (1.0 / 9.0) * e + (1.0 / 9.0) * d
+    def mean9_of(x):
+        """The 3x3 mean of plane ``x``: a ti.func of ``a`` (a cell plus one argument is the widest call, 12)."""
+
+        @ti.func
+        def mean9(a: ti.template()):
+            c, e, d = a.window3(x)
+            return (1.0 / 9.0) * c + (1.0 / 9.0) * e + (1.0 / 9.0) * d
+
+        return mean9
 
     return SimpleNamespace(E=E, lane_abs=lane_abs, channels_of=channels_of, photoreceptors_of=photoreceptors_of,
-                           delayed_mix=delayed_mix, mean9=mean9)
+                           delayed_mix=delayed_mix, mean9_of=mean9_of)
 
 
 @functools.lru_cache(maxsize=None)
@@ -123,6 +127,7 @@ def lgmd1(ti, lanes: int) -> SimpleNamespace:
     """LGMD1's launches: ``load`` (result ``sum_p``) and ``layers`` (result ``sum_G``)."""
     F = _family(ti, lanes)
     pl, k = LGMD1_PLANES, LGMD1_COEFS
+    mean9 = F.mean9_of(pl.S)
 
     @ti.func
     def summation(a: ti.template()):
@@ -148,7 +153,7 @@ def lgmd1(ti, lanes: int) -> SimpleNamespace:
     @ti.func
     def grouping(a: ti.template()):
         """``G = S (*) ones/9``; returns it (summed)."""
-        g = F.mean9(a, pl.S)
+        g = mean9(a)
         a.put(pl.G, g)
         return g
 
@@ -161,6 +166,7 @@ def lgmd2(ti, lanes: int) -> SimpleNamespace:
     """LGMD2's launches: ``load`` (result ``sum_p``) and ``layers`` (results ``max_Ce``, ``sum_G``)."""
     F = _family(ti, lanes)
     pl, k, v = LGMD2_PLANES, LGMD2_COEFS, LGMD2_SCALARS
+    mean9 = F.mean9_of(pl.S)
 
     @ti.func
     def summation(a: ti.template()):
@@ -188,7 +194,7 @@ def lgmd2(ti, lanes: int) -> SimpleNamespace:
     @ti.func
     def excitation(a: ti.template()):
         """``Ce = S (*) ones/9``; returns ``|Ce|`` (maxed)."""
-        ce = F.mean9(a, pl.S)
+        ce = mean9(a)
         a.put(pl.Ce, ce)
         return F.lane_abs(ce)
 
@@ -230,6 +236,7 @@ def flgmd(ti, lanes: int) -> SimpleNamespace:
     it converges the layers, result ``sum_G``) and ``finish`` (the layers of an unconverged solve)."""
     F = _family(ti, lanes)
     pl, k, v = FLGMD_PLANES, FLGMD_COEFS, FLGMD_SCALARS
+    mean9 = F.mean9_of(pl.S)
     #: each channel's drive, constant inhibition, stencil, start, feedback gain (by index) and settled plane
     channel = {"ON": (pl.ON0, pl.Q_on, k.w_on, k.q_on, k.start_on, 0, pl.ON),
                "OFF": (pl.OFF0, pl.Q_off, k.w_off, k.q_off, k.start_off, 1, pl.OFF)}
@@ -254,9 +261,10 @@ def flgmd(ti, lanes: int) -> SimpleNamespace:
         start = iterates[name][0]
 
         @ti.func
-        def prepare(a: ti.template(), drive):
-            """``Q = w_i sum K (1 - a) X(t-1)`` and the start ``X0 + kappa [w X0 - Q]+`` (:meth:`local_start_gains`)."""
-            a.put(x0, drive)
+        def prepare(a: ti.template()):
+            """``Q = w_i sum K (1 - a) X(t-1)`` and the start ``X0 + kappa [w X0 - Q]+`` (:meth:`local_start_gains`)
+            from the drive ``X0`` just written."""
+            drive = a.at(x0)
             c, e, d = a.window3(settled)
             qv = 0.0 * c + a.coef(qk, 0) * e + a.coef(qk, 1) * d
             a.put(q, qv)
@@ -271,8 +279,10 @@ def flgmd(ti, lanes: int) -> SimpleNamespace:
     def load(a: ti.template()):
         """The photoreceptors, the drives, ``Q`` and the iterates' start; returns ``|P|``."""
         on, off, drive = channels(a)
-        prepare_on(a, on)
-        prepare_off(a, off)
+        a.put(pl.ON0, on)
+        a.put(pl.OFF0, off)
+        prepare_on(a)
+        prepare_off(a)
         return drive
 
     def relax_of(name: str, src, dst):
@@ -343,7 +353,7 @@ def flgmd(ti, lanes: int) -> SimpleNamespace:
     @ti.func
     def grouping(a: ti.template()):
         """``G = S (*) ones/9``; returns it (summed)."""
-        g = F.mean9(a, pl.S)
+        g = mean9(a)
         a.put(pl.G, g)
         return g
 
