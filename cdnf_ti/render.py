@@ -63,6 +63,7 @@ from .inputs import resolve_input
 from .limits import check_frame_size
 from .models import create_model
 from .models.base import NotConvergedWarning
+from .paths import inside
 from .stimuli.rain import RainParams, RainyFrames
 from .video import codec_for, write_video
 
@@ -512,7 +513,7 @@ def render_main(argv: Sequence[str]) -> int:
         targets = [out]
     else:
         folder = prepare_output(out)
-        targets = [folder / movie_name(clip, m, c) for m, c in jobs]
+        targets = [inside(folder, movie_name(clip, m, c)) for m, c in jobs]
     rain = RainParams(drops=args.rain_drops) if "rain" in conditions else None
     for (m, c), target in zip(jobs, targets):
         label = f"render {Path(str(args.input)).name} [{m}{'' if c == 'clean' else ', ' + c}]"
@@ -540,7 +541,7 @@ def render_dataset(run: Any, folder: str | Path, progress: bool = False, params:
             if row is None:
                 continue
             src = trace_path(run.out, row["condition"], lab.clip, m, "json")
-            movie = Path(run.out) / "movies" / f"{lab.clip}.{m}.mp4"
+            movie = inside(Path(run.out) / "movies", movie_name(lab.clip, m))
             if movie.is_file() and src.is_file() and movie.stat().st_mtime >= src.stat().st_mtime:
                 made.append(movie)
                 continue

@@ -70,6 +70,7 @@ from .inputs import resolve_input
 from .limits import check_drops, check_frame_size
 from .models import create_model, get_model_class
 from .models.base import NotConvergedWarning, run_models
+from .paths import inside
 from .stimuli.rain import RainParams, RainyFrames
 from .taichi_runtime import lanes_override
 
@@ -229,7 +230,7 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
             continue
         ran += 1
         trace_name = trace_file_name(clip, name, condition)
-        trace.to_csv(out / trace_name)
+        trace.to_csv(inside(out, trace_name))
         alert = alert_summary(trace, getattr(model, "params", None), src.fps)
         fa = alert.first_alert
         fa_txt = f"{fa} ({alert.first_alert_s:.2f} s)" if fa is not None else "none"

@@ -601,3 +601,62 @@ def test_one_failing_model_in_run_gives_an_error_line_for_that_model_only(loomin
     rows = list(csv.DictReader(open(tmp_path / "o" / "summary.csv")))
     assert [(r["model"], r["status"]) for r in rows] == [("cdnf", "ok"),
                                                           ("broken_for_run_test", "error: RuntimeError: model bug")]
+
+
+# --- issue 37: names from data stay inside their folders ---------------------------------------------------
+
+def _listing(root: Path, skip: Path) -> dict[str, tuple[int, int]]:
+    """Every file under ``root`` but those under ``skip``: relative name -> (size, mtime_ns)."""
+    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*")
+            if p.is_file() and skip not in p.parents}
+
+
+@pytest.mark.parametrize("clip", ["../../../victim", "{victim}"])
+def test_clip_name_leaving_the_dataset_folder_is_rejected_naming_the_row(clip, small_dataset, tmp_path):
+    top = tmp_path / "top"
+    ds = top / "a" / "b" / "ds"  # ../../../victim from ds is top/victim
+    shutil.copytree(small_dataset, ds)
+    shutil.copy(ds / "dark_looming.avi", top / "victim.avi")  # a video outside the folder
+    name = clip.format(victim=top / "victim.avi")
+    with open(ds / "labels.csv", "a") as f:
+        f.write(f"{name},non-collision,,,\n")
+    out = top / "a" / "b" / "out"
+    before = _listing(top, ds)
+    proc = _cli("dataset", str(ds), "--out", str(out), "--workers", "0", "--no-progress", timeout=120)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert proc.stderr.strip().splitlines() == [proc.stderr.strip()]
+    assert proc.stderr.startswith(f"error: {ds / 'labels.csv'}: row 5 ({name}): clip name ")
+    assert _listing(top, ds) == before  # nothing written outside the dataset folder (no --out work either)
+    assert not list(top.rglob("victim.*.csv")) and not list(top.rglob("*victim*.png"))
+
+
+@pytest.mark.parametrize("name", ["..", ".", "a/b", "a\\b", "/etc/passwd", "C:x", "", "x\0y"])
+def test_a_name_that_is_not_plain_has_a_problem(name):
+    from cdnf_ti.paths import name_problem
+
+    assert name_problem(name) is not None
+
+
+@pytest.mark.parametrize("name", ["clip", "clip.avi", "a..b", ".hidden", "my clip (1)"])
+def test_a_plain_name_has_no_problem(name):
+    from cdnf_ti.paths import name_problem
+
+    assert name_problem(name) is None
+
+
+@pytest.mark.parametrize("name", ["../x.csv", "/tmp/x.csv", "traces/../../x.csv"])
+def test_output_path_built_from_a_name_that_leaves_its_folder_is_refused(name, tmp_path):
+    from cdnf_ti.paths import PathEscapeError, inside
+
+    with pytest.raises(PathEscapeError, match="must stay inside"):
+        inside(tmp_path, name)
+    assert inside(tmp_path, "traces/clean/c.cdnf.csv") == tmp_path / "traces" / "clean" / "c.cdnf.csv"
+
+
+def test_trace_of_a_clip_named_with_dots_cannot_leave_the_output_folder(tmp_path):
+    from cdnf_ti.experiments.layout import trace_path
+    from cdnf_ti.paths import PathEscapeError
+
+    with pytest.raises(PathEscapeError):
+        trace_path(tmp_path, "clean", "../../victim", "cdnf")

@@ -37,6 +37,7 @@ from ..cli_common import (
 from ..errors import UserError
 from ..frames import iter_grey
 from ..inputs import STIM_PREFIX, parse_stim_spec, resolve_input, stimulus_label
+from ..paths import inside
 from .emulator import EmulatorParams, emulate
 from .readers import is_event_file
 from .source import open_event_source
@@ -133,7 +134,7 @@ def _outputs(args) -> list[Path]:
         return Path(spec).stem
     names = unique_names(list(args.inputs), [name(s) for s in args.inputs])
     ext = ".h5" if args.format == "h5" else ".npy"
-    return [Path(out) / f"{n}{ext}" for n in names]
+    return [inside(out, f"{n}{ext}") for n in names]
 
 
 def _emulate(args) -> int:

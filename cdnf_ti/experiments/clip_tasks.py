@@ -35,6 +35,7 @@ from ..frames import iter_grey, open_source
 from ..limits import check_frame_size
 from ..models import create_model, get_model_class
 from ..models.base import NotConvergedWarning, run_models
+from ..paths import inside
 from ..stimuli.rain import RainParams, RainyFrames
 from .labels import ClipLabel
 from .layout import fingerprint, rain_seed, trace_entry
@@ -455,7 +456,7 @@ class SweepTask:
 
 def setting_folder(out: str | os.PathLike, key: str) -> Path:
     """``OUT/settings/<key>``: where the traces of one sweep setting go."""
-    return Path(out) / "settings" / key
+    return inside(Path(out) / "settings", key)
 
 
 def task_fingerprint(task: SweepTask) -> dict:

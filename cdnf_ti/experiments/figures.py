@@ -20,6 +20,7 @@ from tqdm import tqdm
 from ..atomic import atomic_write, atomic_write_text
 from ..models import get_model_class
 from ..paper import TABLE2
+from ..paths import inside
 from .clipscores import roc_envelope
 from .layout import trace_path
 
@@ -345,9 +346,9 @@ def dataset_figures(run: "DatasetRun", traces: Mapping, specs: Mapping, progress
               if (lab.clip, m, c) in traces}
         if not tr:
             continue
-        png = figdir / f"traces_{lab.clip}.png"
+        png = inside(figdir, f"traces_{lab.clip}.png")
         inputs = [trace_path(run.out, c, lab.clip, m) for (m, c) in tr]
-        stamp = figdir / f".traces_{lab.clip}.key"
+        stamp = inside(figdir, f".traces_{lab.clip}.key")
         key = (f"{sorted(tr)} pad={pad_tag} window={lab.window_start}-{lab.window_end} contact={lab.contact_frame} "
                f"label={lab.label} fig=3")
         if _up_to_date(png, inputs) and stamp.is_file() and stamp.read_text() == key:

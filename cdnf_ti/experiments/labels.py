@@ -23,6 +23,7 @@ from typing import Iterable
 from ..errors import InputError
 from ..events.readers import is_event_file
 from ..frames import open_source
+from ..paths import inside, name_problem
 
 #: Label values and the class each maps to (``near-miss`` counts as non-collision).
 LABEL_VALUES = {"collision": True, "non-collision": False, "noncollision": False, "non_collision": False,
@@ -89,6 +90,7 @@ HINTS = {
     "window": "a collision clip needs window_start <= window_end (frames, inclusive)",
     "empty-window": "leave window_start and window_end empty for a non-collision clip, or label it collision",
     "clip": "give the video's file name without its extension",
+    "plain": "a clip is a file in the dataset folder: give its name without any folder part",
     "duplicate": "keep one row per clip (delete or merge the other)",
     "missing": "put the video in the dataset folder or fix the clip name",
     "outside": "frames are 0-based: the last frame of an N-frame video is N-1",
@@ -191,6 +193,9 @@ def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
         try:
             if not clip:
                 raise _bad(line, "", "empty clip name", "clip")
+            if name_problem(clip) is not None:
+                raise _bad(line, clip, f"clip name {name_problem(clip)}, so it would leave the dataset folder",
+                           "plain")
             if clip in seen:
                 raise _bad(line, "", f"clip {clip!r} is already labelled in row {seen[clip]}", "duplicate")
             seen[clip] = line
@@ -252,16 +257,19 @@ def drop_missing(labels: list[ClipLabel], folder: str | os.PathLike) -> tuple[li
 def find_clip(folder: str | os.PathLike, clip: str) -> Path | None:
     """The file (or image folder) of ``clip`` in ``folder``, or ``None``.
 
+    ``clip`` must be a plain name (:func:`cdnf_ti.paths.inside` raises
+    :class:`~cdnf_ti.paths.PathEscapeError` for one that leaves ``folder``).
+
     An exact file name wins; otherwise the first of :data:`VIDEO_EXTENSIONS`
     that exists; otherwise any file whose stem is ``clip``; otherwise a folder
     named ``clip`` (a folder of images).
     """
     folder = Path(folder)
-    exact = folder / clip
+    exact = inside(folder, clip)
     if exact.is_file():
         return exact
     for ext in VIDEO_EXTENSIONS:
-        cand = folder / f"{clip}{ext}"
+        cand = inside(folder, f"{clip}{ext}")
         if cand.exists():
             return cand
     for cand in sorted(folder.glob(f"{glob_escape(clip)}.*")):

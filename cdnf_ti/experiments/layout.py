@@ -12,6 +12,7 @@ import zlib
 from pathlib import Path
 from typing import Any
 
+from ..paths import inside
 from .tasks import Entry, load_finished, report_stale as report_stale, task_fingerprint
 
 CONDITIONS = ("clean", "rain")
@@ -33,8 +34,8 @@ def rain_seed(seed: int, clip: str) -> int:
 
 
 def trace_path(out: str | os.PathLike, condition: str, clip: str, model: str, ext: str = "csv") -> Path:
-    """``OUT/traces/<condition>/<clip>.<model>.<ext>``."""
-    return Path(out) / "traces" / condition / f"{clip}.{model}.{ext}"
+    """``OUT/traces/<condition>/<clip>.<model>.<ext>``, checked to lie inside it (:func:`cdnf_ti.paths.inside`)."""
+    return inside(Path(out) / "traces" / condition, f"{clip}.{model}.{ext}")
 
 
 def fingerprint(path: str | os.PathLike, condition: str, model: str, seed: int, backend: str,

@@ -4,6 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Mapping, Sequence
 
+from ..paths import inside
 from .clipscores import IN_SAMPLE_NOTE
 from .htmlreport import Page, add_markdown
 
@@ -34,7 +35,7 @@ def write_dataset_html(run: "DatasetRun", summary: Mapping, markdown: str, pngs:
     if present:
         page.heading("Figures")
         page.images(present)
-    clips = [figdir / f"traces_{lab.clip}.png" for lab in run.labels]
+    clips = [inside(figdir, f"traces_{lab.clip}.png") for lab in run.labels]
     clips = [p for p in clips if p.is_file()]
     if clips:
         page.heading("Per-clip traces")
