@@ -660,3 +660,44 @@ def test_trace_of_a_clip_named_with_dots_cannot_leave_the_output_folder(tmp_path
 
     with pytest.raises(PathEscapeError):
         trace_path(tmp_path, "clean", "../../victim", "cdnf")
+
+
+# --- issue 37: content, not modification time ---------------------------------------------------------------
+
+def test_video_changed_in_place_with_size_and_mtime_kept_is_recomputed_with_a_note(small_dataset, tmp_path,
+                                                                                    capsys):
+    from cdnf_ti.experiments.dataset import run_dataset
+
+    ds = tmp_path / "ds"
+    shutil.copytree(small_dataset, ds)
+    clip = ds / "dark_looming.avi"
+    old, new = clip.read_bytes(), (ds / "dark_receding.avi").read_bytes()
+    size = max(len(old), len(new))  # both padded to one size (the AVI reader ignores trailing bytes)
+    clip.write_bytes(old.ljust(size, b"\0"))
+    kw = dict(models=["cdnf"], workers=0, progress=False, figures=False)
+    assert run_dataset(ds, None, tmp_path / "out", **kw).ran == 3
+    st = clip.stat()
+    with open(clip, "r+b") as f:  # another video in place, as cp -p or rsync -t leave it
+        f.write(new.ljust(size, b"\0"))
+    os.utime(clip, ns=(st.st_atime_ns, st.st_mtime_ns))
+    assert (clip.stat().st_size, clip.stat().st_mtime_ns) == (st.st_size, st.st_mtime_ns)
+    capsys.readouterr()
+    again = run_dataset(ds, None, tmp_path / "out", **kw)
+    assert (again.ran, again.skipped) == (1, 2)
+    note = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("note: ")]
+    assert len(note) == 1 and "dark_looming.cdnf [clean]: input file content" in note[0]
+
+
+def test_content_digest_reads_both_ends_of_a_large_file(tmp_path):
+    from cdnf_ti.provenance import CONTENT_SPAN, content_digest
+
+    f = tmp_path / "big.bin"
+    data = bytearray(3 * CONTENT_SPAN)
+    f.write_bytes(data)
+    digests = {content_digest(f)}
+    for at in (0, len(data) - 1):
+        changed = bytearray(data)
+        changed[at] = 1
+        f.write_bytes(changed)
+        digests.add(content_digest(f))
+    assert len(digests) == 3
