@@ -701,3 +701,38 @@ def test_content_digest_reads_both_ends_of_a_large_file(tmp_path):
         f.write_bytes(changed)
         digests.add(content_digest(f))
     assert len(digests) == 3
+
+
+# --- issue 37: frame size changes mid-video -----------------------------------------------------------------
+
+def test_video_whose_frame_size_changes_mid_stream_is_rejected_naming_the_frame(tmp_path):
+    from mjpeg_avi import mjpeg_avi, ramp_frames
+
+    video = tmp_path / "resized.avi"
+    video.write_bytes(mjpeg_avi(ramp_frames(5, 48, 64) + ramp_frames(5, 96, 80)))
+    proc = _cli(str(video), "--out", str(tmp_path / "o"), "--no-progress", timeout=300)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert [ln for ln in proc.stderr.splitlines() if ln.startswith("error")] == [
+        f"error: {video}: frame 5 is 80x96, the video states 64x48 (frame size changed mid-video)"]
+
+
+def test_video_of_one_frame_size_reads_every_frame(tmp_path):
+    from mjpeg_avi import mjpeg_avi, ramp_frames
+
+    from cdnf_ti.frames import iter_grey, open_source
+
+    video = tmp_path / "steady.avi"
+    video.write_bytes(mjpeg_avi(ramp_frames(6, 48, 64)))
+    frames = list(iter_grey(open_source(video), prefetch=0))
+    assert len(frames) == 6 and frames[0].shape == (48, 64)
+
+
+def test_jpeg_size_is_read_from_the_start_of_frame_marker():
+    import cv2
+
+    from cdnf_ti.frames import jpeg_size
+
+    data = cv2.imencode(".jpg", np.zeros((37, 53), np.uint8))[1].tobytes()
+    assert jpeg_size(data) == (53, 37)
+    assert jpeg_size(data[:20]) is None and jpeg_size(b"not a jpeg") is None
