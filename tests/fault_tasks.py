@@ -32,13 +32,18 @@ def die_first_time(marker: str | None) -> str:
     return "ok"
 
 
+#: How long a slow task sleeps (s): far longer than any wait of the tests, so a child that stops at all
+#: was not waiting for one, however loaded the machine is.
+SLOW_TASK_S = 3600.0
+
+
 def main_map_slow(n_slow: int = 6) -> None:
-    """Script body: one quick task then slow ones over 2 local workers; prints each result."""
+    """Script body: one quick task then slow ones (``SLOW_TASK_S``) over 2 local workers; prints each result."""
     from cdnf_ti.experiments.parallel import exit_on_second_interrupt, map_tasks
 
     exit_on_second_interrupt(True)  # as the command line does
     try:
-        for i, r in map_tasks(sleep_then_pid, [0.05] + [60.0] * n_slow, workers=2, arch=None):
+        for i, r in map_tasks(sleep_then_pid, [0.05] + [SLOW_TASK_S] * n_slow, workers=2, arch=None):
             print("done", i, r, flush=True)
     except KeyboardInterrupt:
         from cdnf_ti.experiments.parallel import stop_all_pools

@@ -59,7 +59,7 @@ def _widths() -> dict[str, int]:
     import sys
 
     proc = subprocess.run([sys.executable, str(ROOT / "tests" / "kernel_widths.py")], capture_output=True, text=True,
-                          timeout=900, cwd=ROOT)
+                          cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout[proc.stdout.index("{"):])
 

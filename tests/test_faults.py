@@ -25,9 +25,29 @@ ENV = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), str(TESTS), os.env
 linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="uses /proc and Linux signals")
 
 
-def _cli(*args: str, timeout: float = 300, **kw) -> subprocess.CompletedProcess:
+#: A child that was told to stop (signal, killed parent) and still runs after this long is hung; its slow
+#: tasks (fault_tasks.SLOW_TASK_S) take far longer, so a pass never depends on how fast the machine is.
+HUNG_S = 600
+
+
+def _cli(*args: str, timeout: float | None = None, **kw) -> subprocess.CompletedProcess:
+    """Run the command line in a child process; by default however long it takes (a slow machine is no fault)."""
     return subprocess.run([sys.executable, "-m", "cdnf_ti.run", *args], capture_output=True, text=True,
                           timeout=timeout, env=ENV, **kw)
+
+
+def _cli_and_peak_memory(*args: str) -> tuple[subprocess.CompletedProcess, int | None]:
+    """Run the command line in a child; also return its peak resident memory in bytes (None: not measurable here)."""
+    p = subprocess.Popen([sys.executable, "-m", "cdnf_ti.run", *args], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=ENV)
+    if not hasattr(os, "wait4"):
+        out, err = p.communicate()
+        return subprocess.CompletedProcess(p.args, p.returncode, out, err), None
+    out, err = p.stdout.read(), p.stderr.read()  # one short error line each: no pipe fills
+    _, status, usage = os.wait4(p.pid, 0)
+    p.returncode = os.waitstatus_to_exitcode(status)
+    kib = 1 if sys.platform == "darwin" else 1024  # ru_maxrss: bytes on macOS, KiB elsewhere
+    return subprocess.CompletedProcess(p.args, p.returncode, out, err), usage.ru_maxrss * kib
 
 
 def _children(pid: int) -> list[int]:
@@ -80,13 +100,11 @@ def _start_slow_map() -> subprocess.Popen:
 
 
 @linux_only
-def test_sigint_cancels_pending_tasks_and_exits_130_within_seconds():
+def test_sigint_cancels_pending_tasks_and_exits_130():
     p = _start_slow_map()
-    t0 = time.monotonic()
     p.send_signal(signal.SIGINT)
-    rc = p.wait(timeout=30)
+    rc = p.wait(timeout=HUNG_S)  # the slow tasks (an hour each) were not waited for
     assert rc == 130
-    assert time.monotonic() - t0 < 10  # the slow tasks (60 s each) were not waited for
     assert "interrupted" in p.stdout.read()
 
 
@@ -96,9 +114,8 @@ def test_second_sigint_exits_at_once():
     p.send_signal(signal.SIGINT)
     time.sleep(0.02)
     p.send_signal(signal.SIGINT)
-    t0 = time.monotonic()
-    rc = p.wait(timeout=30)
-    assert rc == 130 and time.monotonic() - t0 < 10
+    rc = p.wait(timeout=HUNG_S)
+    assert rc == 130
 
 
 @linux_only
@@ -109,20 +126,19 @@ def test_sigint_on_parallel_dataset_run_keeps_finished_clips_and_resume_skips_th
     cmd = [sys.executable, "-m", "cdnf_ti.run", "dataset", str(ds), "--out", str(out), "--workers", "2",
            "--no-figures"]
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
-    deadline = time.monotonic() + 240
-    while not list(out.glob("traces/clean/*.json")) and time.monotonic() < deadline and p.poll() is None:
+    while not list(out.glob("traces/clean/*.json")) and p.poll() is None:  # until a clip has finished
         time.sleep(0.05)
+    finished = sorted(x.name for x in out.glob("traces/clean/*.json"))
     p.send_signal(signal.SIGINT)
-    t0 = time.monotonic()
-    rc = p.wait(timeout=60)
+    rc = p.wait(timeout=HUNG_S)
     err = p.stderr.read()
     if rc == 0:
         pytest.skip("the run finished before the interrupt arrived (machine too fast for this test)")
     assert rc == 130, err
-    assert time.monotonic() - t0 < 15
+    assert finished, "no clip finished before the run ended"
     assert "Traceback" not in err and "interrupted" in err
     kept = sorted(x.name for x in out.glob("traces/clean/*.json"))
-    assert kept  # finished clips are kept
+    assert set(finished) <= set(kept)  # the clips finished before the interrupt are kept
     assert not list(out.rglob("*.tmp*"))
     proc = _cli("dataset", str(ds), "--out", str(out), "--workers", "0", "--no-figures", "--no-progress")
     assert proc.returncode == 0, proc.stderr
@@ -158,7 +174,7 @@ def test_killing_the_main_process_leaves_no_orphan_workers():
     assert workers
     p.kill()
     p.wait()
-    deadline = time.monotonic() + 10
+    deadline = time.monotonic() + HUNG_S  # the workers' tasks sleep far longer: alive then means orphaned
     while any(_alive(w) for w in workers) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not any(_alive(w) for w in workers)
@@ -193,7 +209,7 @@ def test_unavailable_arch_is_one_line_and_exit_2(command, looming_npy, small_dat
             "demo": ["demo", "--size", "32", "--no-progress"],
             "dataset": ["dataset", str(small_dataset), "--out", out, "--workers", "2"],
             "experiment": ["experiment", "table1", "--out", out, "--size", "32", "--workers", "2"]}[command]
-    proc = _cli(*args, "--arch", "gpu", timeout=120)
+    proc = _cli(*args, "--arch", "gpu")
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr and "BrokenProcessPool" not in proc.stderr
     assert proc.stderr.strip().splitlines() == [
@@ -286,13 +302,11 @@ def test_unwritable_output_folder_fails_before_any_work(looming_npy, tmp_path):
         ro = tmp_path / "ro"
         ro.mkdir()
         ro.chmod(0o555)
-    t0 = time.monotonic()
-    proc = _cli(str(looming_npy), "--out", str(ro), timeout=120)
+    proc = _cli(str(looming_npy), "--out", str(ro))
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [proc.stderr.strip()]
     assert proc.stderr.startswith(f"error: {ro}: output folder is not writable")
     assert "frames" not in proc.stdout  # no model ran
-    assert time.monotonic() - t0 < 60
 
 
 def test_write_error_names_the_path(tmp_path, monkeypatch):
@@ -326,7 +340,7 @@ def _file_size_limit(limit: int):
 def test_generate_on_a_full_disk_names_the_file_and_not_the_frame_rate(tmp_path):
     out = tmp_path / "loom.avi"
     proc = subprocess.run([sys.executable, "-m", "cdnf_ti.run", "generate", "dark_looming", "--size", "200",
-                           "--out", str(out), "--no-progress"], capture_output=True, text=True, timeout=120,
+                           "--out", str(out), "--no-progress"], capture_output=True, text=True,
                           env=ENV, preexec_fn=_file_size_limit(8_000))
     assert proc.returncode == 2, proc.stderr
     assert "frame rate" not in proc.stderr and "PNG" not in proc.stderr
@@ -347,13 +361,13 @@ def test_generate_on_a_full_disk_names_the_file_and_not_the_frame_rate(tmp_path)
 ])
 def test_impossible_sizes_and_drop_counts_are_rejected_up_front(args, looming_npy, tmp_path):
     argv = [a.format(tmp=tmp_path, npy=looming_npy) for a in args]
-    t0 = time.monotonic()
-    proc = _cli(*argv, timeout=120)
+    proc, peak_bytes = _cli_and_peak_memory(*argv)
     assert proc.returncode == 2, proc.stdout + proc.stderr
     err = [ln for ln in proc.stderr.splitlines() if ln.strip() and not ln.startswith(("usage:", " "))]
     assert len(err) == 1 and "error:" in err[0] and "Traceback" not in proc.stderr  # (argparse adds usage)
     assert "MemoryError" not in proc.stderr
-    assert time.monotonic() - t0 < 60
+    if peak_bytes is not None:  # rejected before any frame was made (one 20000 x 20000 float32 frame: 1.6 GB)
+        assert peak_bytes < 1 << 30, f"peak memory {peak_bytes / 2**20:.0f} MiB"
 
 
 def test_limits_allow_ordinary_sizes():
@@ -444,7 +458,7 @@ def test_second_run_into_a_locked_output_folder_waits_then_runs(looming_npy, tmp
         assert line.startswith("note: ") and "another cdnf_ti run" in line and "waiting" in line
         time.sleep(0.5)
         assert p.poll() is None and not (out / "looming.cdnf.csv").exists()  # it waits, writes nothing
-    assert p.wait(timeout=120) == 0
+    assert p.wait() == 0
     assert (out / "looming.cdnf.csv").exists()
 
 
@@ -527,7 +541,7 @@ def test_library_adopts_a_host_programs_taichi_runtime():
         "CDNF().run(np.random.default_rng(0).random((3, 32, 32), dtype=np.float32))\n"
         "print('kept', x[2])\n"
     )
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=180, env=ENV)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=ENV)
     assert proc.returncode == 0, proc.stderr
     assert "kept 7.0" in proc.stdout
 

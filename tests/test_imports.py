@@ -48,8 +48,7 @@ MODULES = all_modules()
 
 
 def _import(statement: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-c", statement], cwd=ROOT, capture_output=True, text=True,
-                          timeout=300)
+    return subprocess.run([sys.executable, "-c", statement], cwd=ROOT, capture_output=True, text=True)
 
 
 @pytest.fixture(scope="module")
@@ -283,7 +282,7 @@ def test_importing_the_models_and_every_kernel_module_loads_no_compiler():
     code = ("import sys\nimport cdnf_ti.models\n"
             + "".join(f"import {m}\n" for m in KERNEL_MODULES)
             + "print(sorted(m for m in ('taichi', 'quadrants') if m in sys.modules))")
-    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert len(KERNEL_MODULES) >= 5 and proc.stdout.split("\n")[-2] == "[]"
 
