@@ -231,7 +231,7 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
         ran += 1
         trace_name = trace_file_name(clip, name, condition)
         trace.to_csv(out / trace_name)
-        alert = alert_summary(trace, getattr(model, "params", None), src.fps)
+        alert = alert_summary(trace, model.alert_rule(), src.fps)
         fa = alert.first_alert
         fa_txt = f"{fa} ({alert.first_alert_s:.2f} s)" if fa is not None else "none"
         unconv = int((~trace.converged).sum())

@@ -19,6 +19,7 @@ from typing import Any, ClassVar, Iterable, Protocol, Sequence, runtime_checkabl
 import numpy as np
 from tqdm import tqdm
 
+from ..alert_rule import AlertRule
 from ..atomic import atomic_write_text
 from ..errors import UserError
 from ..frames import to_grey
@@ -311,6 +312,18 @@ class Model:
     def threshold(self) -> float | None:
         """Alert threshold on the continuous output, if the model has one."""
         return None
+
+    def alert_rule(self) -> AlertRule:
+        """The model's alert rule with its parameters: the trace column it compares, the level and the
+        rule in words (what ``run``'s line, summary.csv and ``live``'s ``start`` event report).
+
+        Default: ``output > threshold`` when the model has a :attr:`threshold`, else the spike itself.
+        A model whose alert compares something else (a count, a sum of frames) overrides it.
+        """
+        if self.threshold is not None:
+            thr = float(self.threshold)
+            return AlertRule(f"{self.output_name} > {thr:.4g}", self.output_name, self.output_name, thr, strict=True)
+        return AlertRule("spike", "spike", "spike", 1.0)
 
     # -- the per-frame skeleton ------------------------------------------------
     def step(self, frame: np.ndarray) -> StepResult:
