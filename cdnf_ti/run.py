@@ -239,7 +239,9 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
         if rain is not None:
             note += f", rain SNR {rain.snr_db:.2f} dB"
         fps = trace.fps
-        fps_txt = f"{fps:.1f} fps" if math.isfinite(fps) else "n/a fps (one frame)"
+        fps_txt = f"{fps:.1f} fps" if math.isfinite(fps) else "n/a fps (no frame without set-up)"
+        if trace.compile_seconds >= 0.05:
+            fps_txt += f" (set-up and compiling {trace.compile_seconds:.1f} s apart)"
         out_name = "" if clip == src.name else f" -> {clip}"
         cond_txt = "" if condition == "clean" else f" ({condition})"
         extra = "" if alert.quantity == trace.output_name else f" (max {trace.output_name} {trace.output.max():.4f})"
@@ -253,6 +255,7 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
                      "alert_rule": alert.rule, "alert_peak": f"{alert.peak:.6g}", "alert_level": f"{alert.level:g}",
                      "max_output": f"{trace.output.max():.6f}",
                      "proc_fps": f"{fps:.2f}" if math.isfinite(fps) else "",
+                     "compile_s": f"{trace.compile_seconds:.3f}",
                      "status": "ok" if not unconv else "unconverged",
                      "rain_snr_db": f"{rain.snr_db:.4f}" if rain is not None else ""})
     return rows, ran
@@ -261,7 +264,7 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
 #: Columns of ``run``'s summary.csv, in order (see the README's table of CSV columns).
 SUMMARY_COLUMNS = ("input", "clip", "model", "condition", "params", "settings", "trace", "frames", "video_fps",
                    "first_alert", "first_alert_s", "alert_rule", "alert_peak", "alert_level", "max_output", "proc_fps",
-                   "status", "rain_snr_db")
+                   "compile_s", "status", "rain_snr_db")
 
 
 def trace_file_name(clip: str, model: str, condition: str) -> str:
