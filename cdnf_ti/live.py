@@ -479,6 +479,20 @@ def _round(x: float | None, n: int) -> float | None:
     return None if x is None else round(float(x), n)
 
 
+def model_start_record(model) -> dict:
+    """A model in the ``start`` event: its name, output and alert rule (:meth:`~cdnf_ti.models.base.Model.alert_rule`).
+
+    ``threshold`` is the rule's level (for the LGMD family the spike count ``n_ts``), ``rule`` the rule in
+    words, ``compares`` the per-frame value it compares (a frame line's output or diagnostic).
+    A model-like object without ``alert_rule`` gives its ``threshold`` and no rule.
+    """
+    rule = model.alert_rule() if hasattr(model, "alert_rule") else None
+    if rule is None:
+        return {"model": model.name, "output": model.output_name, "threshold": model.threshold}
+    return {"model": model.name, "output": model.output_name, "threshold": rule.level, "rule": rule.rule,
+            "compares": rule.column}
+
+
 class LiveLoop:
     """Runs models on a capture and writes their results.
 
@@ -576,7 +590,7 @@ class LiveLoop:
         capture.start()
         start = {"event": "start", "source": capture.spec.text, "kind": capture.spec.kind, "width": w, "height": h,
                  "fps": round(capture.fps, 3), "queue": self.frames.maxsize,
-                 "models": [{"model": m.name, "output": m.output_name, "threshold": m.threshold} for m in models],
+                 "models": [model_start_record(m) for m in models],
                  "compile_s": round(summary.compile_s, 3)}
         self.sinks.emit(start)
         self.sinks.flush()

@@ -368,6 +368,25 @@ def dsl() -> ModuleType:
 
 _build_lock = threading.RLock()
 _built: dict[str, object] = {}
+#: Kernel instances compiled (or loaded from the compile cache) in this process: each first launch of
+#: a new compile signature (:func:`compiled_as`) and each kernel module built (:func:`kernels`).
+_compiles = 0
+_count_lock = threading.Lock()
+
+
+def compile_count() -> int:
+    """How many kernels this process has compiled so far (a step during which it grows compiled).
+
+    Counts each first launch of a kernel instance (:func:`compiled_as`: the compiler builds its code
+    then, or loads it from the compile cache) and each kernel module built (:func:`kernels`).
+    """
+    return _compiles
+
+
+def _count_compile() -> None:
+    global _compiles
+    with _count_lock:
+        _compiles += 1
 
 
 def lanes() -> int:
@@ -392,6 +411,7 @@ def kernels(name: str):
         if got is None:
             ti = dsl()
             module = importlib.import_module(f"{__package__}.kernels.{name}")
+            _count_compile()
             got = _built[name] = module.build(ti, lanes())
         return got
 
@@ -496,6 +516,7 @@ def compiled_as(kernel, scalarize: bool):
         sig = signature(args)
         if sig in compiled:
             return kernel(*args)
+        _count_compile()
         with _compile_lock:
             cfg = ti.lang.impl.current_cfg()
             before = cfg.real_matrix_scalarize

@@ -176,12 +176,12 @@ def test_run_line_names_the_rule_and_the_peak(looming_npy, tmp_path, capsys):
 
 
 def test_a_peak_short_of_the_level_says_how_far(capsys):
-    from cdnf_ti.alert_rule import alert_summary
+    from cdnf_ti.alert_rule import AlertRule, alert_summary
     from cdnf_ti.models.base import Trace
 
     n = 4
     tr = Trace("cdnf", "I_v", 0.506, np.array([0.5, 0.502, 0.504, 0.501]), np.zeros(n, bool), np.ones(n, bool), {})
-    s = alert_summary(tr, fps=30)
+    s = alert_summary(tr, AlertRule("I_v > 0.506", "I_v", "I_v", 0.506, strict=True), fps=30)
     assert not s.reached and s.first_alert is None
     assert s.text() == "max I_v 0.5040, alert when I_v > 0.506, 0.0020 short"
 

@@ -40,6 +40,12 @@ class Engine:
         return taichi_runtime.ensure_taichi(arch)
 
     @staticmethod
+    def compile_count() -> int:
+        """Kernels compiled (or loaded from the compile cache) in this process so far
+        (:func:`~cdnf_ti.taichi_runtime.compile_count`)."""
+        return taichi_runtime.compile_count()
+
+    @staticmethod
     def backend(model: Any, shape: tuple[int, int]) -> Any:
         """The compiled backend of ``model`` for frames of ``shape`` (H, W)."""
         # the model's own name, else the nearest base class's (a subclass that changes no equations)

@@ -46,6 +46,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ..alert_rule import AlertRule
 from ..baselines_reference import NumpySDNFBackend
 from ..params import CDNFParams, ModelParams, check_params, dog_radius, gaussian_profile, sigmoid, theta
 from .base import Model, StepResult, Trace
@@ -183,6 +184,15 @@ class SDNF(Model):
     def threshold(self) -> float:
         """Static part of the (dynamic) alert threshold, ``0.5 + epsilon``."""
         return self.params.threshold
+
+    def alert_rule(self) -> AlertRule:
+        """``I > max(0.5 + epsilon, I(t-1) + delta)`` on ``n_persist`` frames in a row: the ``run`` diagnostic
+        against ``n_persist``."""
+        p, name = self.params, self.output_name
+        prev = f"{name}(t-1)" + (f" + {p.delta:g}" if p.delta else "")
+        n = int(p.n_persist)
+        return AlertRule(f"{name} > max({p.threshold:.4g}, {prev}) on {n} frames in a row",
+                         "frames in a row above the dynamic threshold", "run", float(n))
 
     def _reset_state(self) -> None:
         self._prev = 0.5  # I(t-1)
