@@ -168,8 +168,8 @@ def frame_level(clips: Sequence[ClipOutput]) -> dict:
 
 
 def _before_event(c: ClipOutput) -> np.ndarray:
-    """The scores a clip offers for anticipation: a positive clip's frames before its event, a negative
-    clip's all frames."""
+    """The scores a clip offers for anticipation: a positive clip's frames that end by its event (those
+    before the frame holding it, :func:`~.labels.frame_at`), a negative clip's all frames."""
     s = _finite(c.scores)
     if c.annotation.event_s is None:
         return s
@@ -179,8 +179,8 @@ def _before_event(c: ClipOutput) -> np.ndarray:
 def anticipation(clips: Sequence[ClipOutput]) -> dict:
     """Video-level anticipation AP and mean time-to-accident (mTTA), as DAD, CCD and DoTA report them.
 
-    At a threshold ``th`` a video is *alerted* when a frame before its event (every frame of a negative
-    video) scores ``>= th``; a positive video alerted is a true positive, and its time-to-accident is
+    At a threshold ``th`` a video is *alerted* when a frame before its event (a frame that ends by the
+    event time; any frame of a negative video) scores ``>= th``; a positive video alerted is a true positive, and its time-to-accident is
     ``t_e - k / fps`` s, ``k`` the first such frame. Precision and recall over videos give the AP
     (:func:`average_precision` of each video's highest score before its event); the TTA averaged over the
     true positives at each threshold, maximised over the thresholds of each distinct recall and averaged
