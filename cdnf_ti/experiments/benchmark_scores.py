@@ -181,8 +181,9 @@ def anticipation(clips: Sequence[ClipOutput]) -> dict:
 
     At a threshold ``th`` a video is *alerted* when a frame before its event (a frame that ends by the
     event time; any frame of a negative video) scores ``>= th``; a positive video alerted is a true
-    positive, and its time-to-accident is ``t_e - k / fps`` s, ``k`` the first such frame. Precision and recall over videos give the AP
-    (:func:`average_precision` of each video's highest score before its event); the TTA averaged over the
+    positive, and its time-to-accident is ``t_e - k / fps`` s, ``k`` the first such frame. Precision and
+    recall over videos give the AP (:func:`average_precision` of each video's highest score before its
+    event); the TTA averaged over the
     true positives at each threshold, maximised over the thresholds of each distinct recall and averaged
     over the recalls above 0, gives the mTTA in seconds (Chan et al. 2016's ``evaluation``, in seconds;
     its AP there is trapezoidal and here step-wise). Positive clips with no frame before the event are
