@@ -2,7 +2,8 @@
 
 Each ``make_<format>(folder)`` writes a handful of short synthetic clips (64 x 64 px, a few KB each) and the
 annotation files in the exact format the benchmark distributes (docs/EVALUATION.md, "Benchmarks"), and
-returns what it wrote: ``{clip name as the reader names it: (event frame or None, fps)}``. Positive clips
+returns what it wrote: ``{clip name as the reader names it: (event frame or None, fps, per-frame labels)}``
+(the labels as the benchmark defines them; all 0 for a negative clip). Positive clips
 loom up to their event frame; negative clips translate or recede.
 """
 from __future__ import annotations
@@ -43,7 +44,7 @@ def make_nexar(folder: Path) -> dict:
         event = None if ev is None else round(ev * fps)
         write_video(folder / "train" / f"{vid}.mp4", clip_frames(n, event, None if target else "light_receding"), fps)
         lines.append(f"{vid},{'' if ev is None else ev},{'' if al is None else al},{target}")
-        out[vid] = (event, fps)
+        out[vid] = (event, fps, [int(event is not None and k >= event) for k in range(n)])
     (folder / "train.csv").write_text("\n".join(lines) + "\n")
     return out
 
@@ -60,10 +61,10 @@ def make_ccd(folder: Path) -> dict:
         write_video(folder / "Crash-1500" / f"{vid}.mp4", clip_frames(n, event), fps)
         bins = ", ".join(str(int(k >= event)) for k in range(n))
         lines.append(f"{vid},[{bins}],{1000 + 37 * i:06d},{5000 + i},{timing},{weather},{ego}")
-        out[f"crash_{vid}"] = (event, fps)
+        out[f"crash_{vid}"] = (event, fps, [int(k >= event) for k in range(n)])
     for vid in ("000001", "000002"):
         write_video(folder / "Normal" / f"{vid}.mp4", clip_frames(n, None), fps)
-        out[f"normal_{vid}"] = (None, fps)
+        out[f"normal_{vid}"] = (None, fps, [0] * n)
     (folder / "Crash-1500.txt").write_text("\n".join(lines) + "\n")
     return out
 
@@ -79,7 +80,7 @@ def make_dad(folder: Path) -> dict:
         d.mkdir(parents=True, exist_ok=True)
         event = 90 if cls == "positive" else None
         write_video(d / f"{name}.mp4", clip_frames(n, event), fps)
-        out[f"{split}_{cls}_{name}"] = (event, fps)
+        out[f"{split}_{cls}_{name}"] = (event, fps, [int(event is not None and k >= event) for k in range(n)])
     return out
 
 
@@ -106,7 +107,7 @@ def make_dota(folder: Path) -> dict:
             "ego_involve": ego, "night": night, "labels": per_frame}))
         meta[subset][name] = {"video_start": 100, "video_end": 100 + n - 1, "anomaly_start": start,
                               "anomaly_end": end, "anomaly_class": "ego: lateral", "num_frames": n, "subset": subset}
-        out[name] = (start, fps)
+        out[name] = (start, fps, [int(start <= k < end) for k in range(n)])
     for subset, d in meta.items():
         (folder / f"metadata_{subset}.json").write_text(json.dumps(d, indent=2))
     return out
