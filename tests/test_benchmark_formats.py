@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from data.benchmarks.layouts import MAKERS
 
 from cdnf_ti.errors import InputError
 from cdnf_ti.experiments.benchmark_formats import read_benchmark
@@ -15,7 +16,6 @@ from cdnf_ti.experiments.dataset import run_dataset, trace_path
 from cdnf_ti.models import MODELS
 from cdnf_ti.models.base import Trace
 from cdnf_ti.run import main
-from data.benchmarks.layouts import MAKERS
 
 metrics = pytest.importorskip("sklearn.metrics", reason="scikit-learn (the 'test' extra) is the reference")
 
