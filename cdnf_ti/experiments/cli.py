@@ -45,6 +45,7 @@ from ..render import render_dataset
 from ..stimuli.basic import BASIC_STIMULI
 from ..stimuli.incoherent import SCATTERS
 from . import builtin
+from .benchmark_formats import FORMATS
 from .dataset import run_dataset
 from .labels import drop_missing, find_clip, read_labels
 from .paramsweep import run_param_sweep
@@ -143,16 +144,22 @@ def _dataset(args, folder: Path, out: Path) -> int:
     models = parse_models(args.models)
     check_model_options(args)
     params = params_from_args(args, models)
-    _skip_missing(args, folder)
-    _note_event_options(args, folder)
+    fmt = getattr(args, "format", "labels")
+    if fmt == "labels":
+        _skip_missing(args, folder)
+        _note_event_options(args, folder)
+    elif getattr(args, "render", False):
+        raise UserError(f"--render works with --format labels only (not {fmt})")
     run = run_dataset(folder, args.labels, out, models=models, rain=RAIN_ENGINE_WORD[args.rain],
                       padding=Padding(args.pad_before, args.pad_after), seed=rain_seed_of(args),
                       workers=args.workers, scheduler=args.scheduler, backend=args.backend, arch=args.arch,
                       progress=not args.no_progress, figures=not args.no_figures, rain_params=_rain_params(args),
                       params=params, fps=args.fps, color_order=args.color_order, skip_missing=args.skip_missing,
-                      events=event_options_of(args))
+                      events=event_options_of(args), fmt=fmt, split=getattr(args, "split", None))
     print(table2_markdown(run.summary["results"], run.models, run.conditions))
     for line in headline(run):
+        print(line)
+    for line in benchmark_headline(run):
         print(line)
     print(f"{len(run.labels)} clips x {len(run.models)} models x {len(run.conditions)} conditions: "
           f"{run.ran} run now, {run.skipped} reused; results in {out}/ (results.csv, summary.md)")
@@ -187,6 +194,24 @@ def headline(run) -> list[str]:
             acc = pct(d.get("accuracy")) if scored else "n/a"
             lines.append(f"{m}, {c}: accuracy {acc} over {scored} scored clip(s) of {len(rows)}"
                          + (f"; {failed} failed (not scored)" if failed else ""))
+    return lines
+
+
+def benchmark_headline(run) -> list[str]:
+    """One line per model and condition: the benchmark's headline metric with its interval, and the median
+    lead time before the event in seconds (summary.md, "Benchmark scores", has the rest)."""
+    bench = run.summary.get("benchmark") or {}
+    lines = []
+    for m, per in (bench.get("results") or {}).items():
+        for c, d in per.items():
+            h, lt = d["headline"], d["lead_times"]
+            val = "n/a" if h["value"] is None else f"{h['value']:.3f}"
+            if h["value"] is not None and h["ci_lo"] is not None:
+                val += f" [{h['ci_lo']:.3f}, {h['ci_hi']:.3f}]"
+            med = "n/a" if lt["median_s"] is None else f"{lt['median_s']:+.2f} s"
+            alerted = lt["positive_clips"] - lt["never_alerted"]
+            lines.append(f"{m}, {c}: {bench['format']} {bench['headline']} {val}; median lead time {med} "
+                         f"over {alerted} of {lt['positive_clips']} positive clip(s)")
     return lines
 
 
@@ -230,6 +255,14 @@ def dataset_main(argv: Sequence[str]) -> int:
     add_output_option(ap, default="cdnf_out/dataset")
     ap.add_argument("--render", action="store_true",
                     help="also write a field movie of each scored clip and model (OUT/movies/<clip>.<model>.mp4)")
+    ap.add_argument("--format", choices=FORMATS, default="labels",
+                    help="layout of DIR: cdnf_ti's labels.csv (default) or a public benchmark's as distributed: "
+                         "nexar (train.csv, train/<id>.mp4), ccd (Crash-1500.txt, Crash-1500/, Normal/), dad "
+                         "(videos/{training,testing}/{positive,negative}/), dota (annotations/*.json, frames/); "
+                         "--labels then names its annotation file when it is elsewhere (docs/EVALUATION.md)")
+    ap.add_argument("--split", default=None,
+                    help="the benchmark's split: dad training|testing, dota train|val (its metadata_<split>.json); "
+                         "default: every clip")
     _add_dataset_options(ap, rain_default="off")
     args = ap.parse_args(list(argv))
     folder = Path(args.folder)

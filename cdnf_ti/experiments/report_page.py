@@ -30,6 +30,7 @@ def write_dataset_html(run: "DatasetRun", summary: Mapping, markdown: str, pngs:
     named = [(figdir / "accuracy.png", "Accuracy per model and condition (paper Table II: diamonds)"),
              (figdir / "roc.png", "Clip-level ROC over the alert level (AUC in the legend)"),
              (figdir / "lead_times.png", "First alert time relative to contact on every collision clip"),
+             (figdir / "lead_time_seconds.png", "Lead time before the event (s) per model: the benchmark section"),
              (figdir / "threshold_sweep.png", "Threshold sweep (in-sample: scored on the same clips)")]
     present = [(p, c) for p, c in named if p.is_file()]
     if present:

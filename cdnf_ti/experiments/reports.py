@@ -10,6 +10,7 @@ import numpy as np
 from ..atomic import atomic_write_json, atomic_write_text
 from ..models.base import Trace
 from ..paper import TABLE2
+from .benchmark_reports import write_benchmark
 from .clipscores import (
     IN_SAMPLE_NOTE,
     bootstrap_accuracy,
@@ -372,8 +373,11 @@ def lead_time_markdown(run: "DatasetRun", summary: Mapping) -> list[str]:
 
 
 def write_reports(run: "DatasetRun", dataset: str, labels_path: str, seed: int, figures: bool = True,
-                  progress: bool = False) -> None:
-    """Write results.csv, threshold_sweep.csv, summary.md/json and (optionally) the figures."""
+                  progress: bool = False, fmt: str = "labels", annotations: Mapping | None = None) -> None:
+    """Write results.csv, threshold_sweep.csv, summary.md/json and (optionally) the figures.
+
+    ``fmt`` and ``annotations`` (clip -> :class:`~.annotations.Annotation`; None: the labels.csv rows) say
+    which benchmark's scores the summary's benchmark section gives (:mod:`.benchmark_reports`)."""
     out = Path(run.out)
     atomic_write_text(out / "results.csv", csv_text(run.rows, RESULT_COLUMNS))
     traces = load_traces(run)
@@ -381,10 +385,13 @@ def write_reports(run: "DatasetRun", dataset: str, labels_path: str, seed: int, 
     atomic_write_text(out / "threshold_sweep.csv", csv_text(run.sweep, SWEEP_COLUMNS))
     scores = honest_scores(run, traces, specs, seed=seed)
     run.summary = summary_dict(run, specs, dataset, labels_path, seed, scores)
+    bench, bench_md, bench_pngs = write_benchmark(run, traces, fmt, annotations, seed, figures)
+    run.summary["benchmark"] = bench
     atomic_write_json(out / "summary.json", run.summary)
     markdown = summary_markdown(run, run.summary, specs)
+    markdown = "\n".join([*markdown.rstrip("\n").split("\n"), *bench_md, ""])
     atomic_write_text(out / "summary.md", markdown)
     pngs: list = []
     if figures:
-        pngs = dataset_figures(run, traces, specs, progress=progress)
+        pngs = dataset_figures(run, traces, specs, progress=progress) + bench_pngs
     write_dataset_html(run, run.summary, markdown, pngs)
