@@ -58,6 +58,7 @@ from .cli_common import (
     positive_float,
 )
 from .errors import InputError, UserError, output_error
+from .experiments.parallel import acknowledge_signal
 from .limits import check_frame_size
 from .live_sources import Capture, Frame, LatestFrames, ProcessCapture, SourceSpec, StreamEnded, parse_source
 from .models import create_model
@@ -732,6 +733,7 @@ class _Signals:
         return self
 
     def _handle(self, signum, frame) -> None:
+        acknowledge_signal()
         if self.received is not None:
             os._exit(EXIT_INTERRUPTED if signum == signal.SIGINT else 128 + signum)
         self.received = signum

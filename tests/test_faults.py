@@ -736,3 +736,52 @@ def test_jpeg_size_is_read_from_the_start_of_frame_marker():
     data = cv2.imencode(".jpg", np.zeros((37, 53), np.uint8))[1].tobytes()
     assert jpeg_size(data) == (53, 37)
     assert jpeg_size(data[:20]) is None and jpeg_size(b"not a jpeg") is None
+
+
+# --- issue 37: signals ----------------------------------------------------------------------------------------
+
+def _read_until(stream, text: str) -> list[str]:
+    """Lines of ``stream`` up to and including the first that contains ``text`` (all of them at EOF)."""
+    lines = []
+    for line in stream:
+        lines.append(line)
+        if text in line:
+            break
+    return lines
+
+
+def _wchan(pid: int) -> str:
+    """What the main thread of process ``pid`` waits on in the kernel (``futex_do_wait``, ...)."""
+    try:
+        return Path(f"/proc/{pid}/wchan").read_text()
+    except OSError:
+        return ""
+
+
+@linux_only
+def test_ctrl_c_while_native_code_holds_the_interpreter_ends_the_run_and_keeps_finished_results(looming_npy,
+                                                                                                tmp_path):
+    stall = tmp_path / "stall.npy"  # stands for an input whose kernels compile: see fault_tasks
+    shutil.copy(looming_npy, stall)
+    out = tmp_path / "o"
+    code = "import fault_tasks\nfault_tasks.main_run_with_native_stall()\n"
+    p = subprocess.Popen([sys.executable, "-c", code, str(looming_npy), str(stall), "--backend", "numpy",
+                          "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+    try:
+        lines = _read_until(p.stdout, "stalling")
+        assert lines and "stalling" in lines[-1], "".join(lines) + p.stderr.read()
+        finished = (out / "looming.cdnf.csv").read_bytes()
+        deadline = time.monotonic() + 120
+        while "futex" not in _wchan(p.pid) and time.monotonic() < deadline:  # until it waits in native code
+            time.sleep(0.05)
+        assert "futex" in _wchan(p.pid)
+        p.send_signal(signal.SIGINT)
+        rc = p.wait(timeout=30)  # the stall never ends
+    finally:
+        p.kill()
+        p.wait()
+    err = p.stderr.read()
+    assert rc != 0 and "Traceback" not in err
+    assert "interrupted while native code (a kernel compile) holds the interpreter" in err
+    assert (out / "looming.cdnf.csv").read_bytes() == finished
+    assert not (out / "stall.cdnf.csv").exists()
