@@ -23,6 +23,7 @@ from typing import Any, Callable, Iterator, Sequence
 
 from tqdm import tqdm
 
+from ..atomic import remove_stale_temps
 from ..errors import UserError
 from ..taichi_runtime import current_arch, ensure_taichi, limit_cpu_threads
 
@@ -365,6 +366,42 @@ def _interrupt(signum, frame) -> None:
     """Ctrl-C under :func:`watch_interrupts`: Python's own behaviour (KeyboardInterrupt), acknowledged."""
     acknowledge_signal()
     raise KeyboardInterrupt
+
+
+def _terminate(signum, frame) -> None:
+    """SIGTERM under :func:`handle_sigterm_as_interrupt`: the same as a first Ctrl-C (KeyboardInterrupt: the
+    run stops its workers, removes its temporary files and lock, and says so); a second SIGTERM or Ctrl-C
+    during that clean-up ends the process at once."""
+    acknowledge_signal()
+    signal.signal(signal.SIGTERM, _exit_now)
+    if _EXIT_ON_SECOND_INTERRUPT:
+        signal.signal(signal.SIGINT, _exit_now)
+    raise KeyboardInterrupt
+
+
+def handle_sigterm_as_interrupt() -> bool:
+    """For command-line programs: SIGTERM (``kill``, a job scheduler's stop) is handled like a first Ctrl-C
+    instead of ending the process on the spot, which left temporary files, the output lock and the worker
+    pool's semaphores behind. Returns whether it is installed (the main thread, SIGTERM not handled by a host)."""
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGTERM) not in (signal.SIG_DFL, _terminate):
+        return False
+    signal.signal(signal.SIGTERM, _terminate)
+    return True
+
+
+@contextlib.contextmanager
+def cleaned_up(out: str | os.PathLike) -> Iterator[None]:
+    """A batch run writing under ``out``: first remove the temporary files of writers that died (a run
+    killed mid-write), and on Ctrl-C or SIGTERM stop the workers at once and remove the temporary files
+    they leave (every finished result is kept: it was written atomically)."""
+    remove_stale_temps(out)
+    try:
+        yield
+    except KeyboardInterrupt:
+        stop_all_pools()
+        remove_stale_temps(out)
+        raise
 
 
 def _exit_now(signum, frame) -> None:
