@@ -10,6 +10,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -823,3 +824,33 @@ def test_sigterm_stops_a_parallel_batch_run_like_ctrl_c(command, small_dataset, 
     assert "leaked semaphore" not in err and "resource_tracker" not in err
     assert not (out / ".cdnf_ti.lock").exists()
     assert not list(out.rglob("*.tmp*"))
+
+
+def test_second_signal_during_the_clean_stop_of_live_record_leaves_a_playable_recording(tmp_path, monkeypatch):
+    import cv2
+
+    from cdnf_ti.live import Recorder, _Signals
+    from cdnf_ti.live_sources import Frame
+
+    exits = []
+    monkeypatch.setattr(os, "_exit", exits.append)  # the process would end here
+    path = tmp_path / "rec.avi"
+    recorder = Recorder(path, fps=30.0, backlog=512)
+    image = np.zeros((64, 64), np.uint8)
+    result = {"model": "cdnf", "output_name": "I_v", "value": 0.5, "alert": False, "latency_ms": 1.0}
+    for t in range(300):  # a backlog the clean stop would still be writing
+        recorder.put(Frame(t, image, 0.0, t / 30.0), [result])
+    deadline = time.monotonic() + 120
+    while recorder._queue.qsize() > 297 and time.monotonic() < deadline:  # the writer has taken 3 frames
+        time.sleep(0.01)
+    signals = _Signals(threading.Event(), recorder.finish_now)
+    signals._handle(signal.SIGINT, None)  # Ctrl-C: the clean stop begins
+    signals._handle(signal.SIGINT, None)  # Ctrl-C again: the process ends now
+    assert exits == [130]
+    cap = cv2.VideoCapture(str(path))
+    frames = 0
+    while cap.read()[0]:
+        frames += 1
+    cap.release()
+    assert frames > 0
+    assert not [p for p in tmp_path.iterdir() if p.name != "rec.avi"]  # no hidden temporary file left
