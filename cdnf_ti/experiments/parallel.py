@@ -305,6 +305,8 @@ while True:
 
 #: Write end of the pipe on which Python-level signal handlers tell the watchdog they ran (None: no watchdog).
 _ACK_FD: int | None = None
+#: The watchdog process (kept referenced: it runs as long as the program).
+_WATCHDOG_PROCESS: Any = None
 
 
 def acknowledge_signal() -> None:
@@ -332,25 +334,25 @@ def watch_interrupts(grace_s: float = INTERRUPT_GRACE_S) -> bool:
     bool
         Whether the watchdog runs: POSIX, the main thread, no wake-up file set by a host program.
     """
-    global _ACK_FD
+    global _ACK_FD, _WATCHDOG_PROCESS
     if _ACK_FD is not None:
         return True
     if os.name != "posix" or threading.current_thread() is not threading.main_thread():
         return False
+    import subprocess  # lazy: only command-line programs start the watchdog
+
     sig_r, sig_w = os.pipe()
     ack_r, ack_w = os.pipe()
     os.set_blocking(sig_w, False)
+    host = signal.set_wakeup_fd(sig_w, warn_on_full_buffer=False)
     try:
-        if signal.set_wakeup_fd(sig_w, warn_on_full_buffer=False) != -1:  # a host's own: put it back
-            signal.set_wakeup_fd(signal.set_wakeup_fd(-1))
-            raise OSError("a wake-up file is already set")
-        import subprocess  # lazy: only command-line programs start the watchdog
-
-        subprocess.Popen([sys.executable, "-S", "-c", _WATCHDOG, str(sig_r), str(ack_r), str(os.getpid()),
-                          str(grace_s)], pass_fds=(sig_r, ack_r), stdin=subprocess.DEVNULL,
-                         stdout=subprocess.DEVNULL)
-    except (OSError, ValueError):
-        signal.set_wakeup_fd(-1)
+        if host != -1:
+            raise OSError("a host program has its own wake-up file")
+        _WATCHDOG_PROCESS = subprocess.Popen(
+            [sys.executable, "-S", "-c", _WATCHDOG, str(sig_r), str(ack_r), str(os.getpid()), str(grace_s)],
+            pass_fds=(sig_r, ack_r), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+    except OSError:
+        signal.set_wakeup_fd(host)  # the host's own again (or none)
         for fd in (sig_r, sig_w, ack_r, ack_w):
             os.close(fd)
         return False
