@@ -612,7 +612,7 @@ def _listing(root: Path, skip: Path) -> dict[str, tuple[int, int]]:
             if p.is_file() and skip not in p.parents}
 
 
-@pytest.mark.parametrize("clip", ["../../../victim", "{victim}"])
+@pytest.mark.parametrize("clip", ["../../../victim", "{victim}", "/etc/passwd"])
 def test_clip_name_leaving_the_dataset_folder_is_rejected_naming_the_row(clip, small_dataset, tmp_path):
     top = tmp_path / "top"
     ds = top / "a" / "b" / "ds"  # ../../../victim from ds is top/victim
