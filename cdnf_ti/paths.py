@@ -27,17 +27,24 @@ class PathEscapeError(UserError):
         super().__init__(f"{name!s}: {problem}; a name must stay inside {folder!s}")
 
 
-def name_problem(name: str) -> str | None:
+#: Longest file name most file systems take (bytes, UTF-8; ``NAME_MAX`` on Linux and macOS).
+NAME_MAX = 255
+
+
+def name_problem(name: str, max_bytes: int = NAME_MAX) -> str | None:
     """What makes ``name`` unfit as a plain file name inside a folder, or ``None`` when it is fit.
 
     A plain name is not empty, not ``.`` or ``..``, has no ``/`` or ``\\`` and no NUL
-    character, and is not absolute or drive-relative on any system (``/etc/passwd``,
-    ``C:x``).
+    character, is not absolute or drive-relative on any system (``/etc/passwd``,
+    ``C:x``), and is at most ``max_bytes`` bytes long in UTF-8.
 
     Parameters
     ----------
     name : str
         The name as written (a clip name from a labels file, a file stem).
+    max_bytes : int
+        Longest name accepted (bytes); less than :data:`NAME_MAX` leaves room for what a
+        caller appends to the name.
 
     Returns
     -------
@@ -57,6 +64,8 @@ def name_problem(name: str) -> str | None:
         return "is '.'"
     if len(parts) > 1:
         return "contains a path separator"
+    if len(name.encode("utf-8", "surrogatepass")) > max_bytes:
+        return f"is longer than {max_bytes} bytes"
     return None
 
 

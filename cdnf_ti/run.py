@@ -64,7 +64,12 @@ from .cli_common import (
 from .errors import InputError, UserError
 from .events.readers import is_event_file
 from .events.source import EventSource, open_event_source
-from .experiments.parallel import exit_on_second_interrupt, stop_all_pools
+from .experiments.parallel import (
+    exit_on_second_interrupt,
+    handle_sigterm_as_interrupt,
+    stop_all_pools,
+    watch_interrupts,
+)
 from .frames import IMAGE_EXTENSIONS, iter_grey
 from .inputs import resolve_input
 from .limits import check_drops, check_frame_size
@@ -436,8 +441,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     code 2; any other exception propagates with its traceback (it is a bug).
     """
     program = argv is None
-    if program:  # run as a program: a second Ctrl-C after a first one ends it at once
-        exit_on_second_interrupt(True)
+    if program:  # run as a program: a second Ctrl-C after a first one ends it at once, and one during
+        exit_on_second_interrupt(True)  # a kernel compile within seconds; SIGTERM is a first Ctrl-C
+        handle_sigterm_as_interrupt()
+        watch_interrupts()
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         lanes_override()  # a bad $CDNF_TI_LANES is one line now, not one error per clip later

@@ -51,3 +51,34 @@ def main_map_slow(n_slow: int = 6) -> None:
         stop_all_pools()  # as the command line does
         print("interrupted", flush=True)
         os._exit(130)  # as the command line does
+
+
+def hold_the_interpreter() -> None:
+    """Never return, in native code that holds the interpreter and ignores signals, as a long kernel
+    compile does: lock a plain pthread mutex twice from one thread (``ctypes.PyDLL`` keeps the GIL)."""
+    import ctypes
+
+    libc = ctypes.PyDLL(None)
+    mutex = ctypes.create_string_buffer(64)  # zeroed: PTHREAD_MUTEX_INITIALIZER, a normal mutex
+    libc.pthread_mutex_lock(mutex)
+    libc.pthread_mutex_lock(mutex)
+
+
+def main_run_with_native_stall() -> None:
+    """Script body: ``python -m cdnf_ti.run`` with the arguments given, where the models' pass over an
+    input named ``stall`` first holds the interpreter for good (:func:`hold_the_interpreter`); prints
+    ``stalling`` just before."""
+    import sys
+
+    from cdnf_ti import run
+
+    real = run.run_models
+
+    def stalling(models, frames, **kw):
+        if "stall" in str(kw.get("progress")):
+            print("stalling", flush=True)
+            hold_the_interpreter()
+        return real(models, frames, **kw)
+
+    run.run_models = stalling
+    sys.exit(run.main())

@@ -23,7 +23,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from ..atomic import output_lock, prepare_output, remove_stale_temps
+from ..atomic import output_lock, prepare_output
 from ..errors import InputError, UserError
 from . import parallel
 from .benchmark_formats import read_benchmark
@@ -168,17 +168,11 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
         raise UserError("no model named")
     out = prepare_output(out)  # before any work: a folder that cannot be written fails now
     files = {clip: Path(f).resolve() for clip, f in files.items()}  # workers may run elsewhere
-    with output_lock(out):
-        remove_stale_temps(out)  # left by a run killed mid-write
-        try:
-            return _run_locked(folder, labels_path, labels, files, out, models, conditions, padding, seed,
-                               workers, scheduler, backend, arch, progress, figures, rain_params, on_record,
-                               dict(params=params, fps=fps, color_order=color_order, **(events or {})),
-                               fmt, annotations)
-        except KeyboardInterrupt:
-            parallel.stop_all_pools()
-            remove_stale_temps(out)  # the workers stopped mid-write leave no half-written files
-            raise
+    with output_lock(out), parallel.cleaned_up(out):
+        return _run_locked(folder, labels_path, labels, files, out, models, conditions, padding, seed,
+                           workers, scheduler, backend, arch, progress, figures, rain_params, on_record,
+                           dict(params=params, fps=fps, color_order=color_order, **(events or {})),
+                           fmt, annotations)
 
 
 def _run_locked(folder, labels_path, labels, files, out, models, conditions, padding, seed, workers, scheduler,

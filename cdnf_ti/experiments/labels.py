@@ -31,6 +31,9 @@ LABEL_VALUES = {"collision": True, "non-collision": False, "noncollision": False
 REQUIRED_COLUMNS = ("clip", "label", "window_start", "window_end")
 #: The window in seconds from the clip's start (instead of ``window_start``, ``window_end``, ``contact_frame``).
 SECONDS_COLUMNS = ("window_start_s", "window_end_s", "contact_s")
+#: Longest clip name (bytes, UTF-8): the longest file name (255) less room for what output names add
+#: (``traces_<clip>.png``, ``<clip>.<model>.<condition>.mp4``).
+CLIP_NAME_MAX = 200
 #: File name endings tried, in order, when looking a clip up in the dataset folder.
 VIDEO_EXTENSIONS = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv", ".npy")
 
@@ -90,7 +93,8 @@ HINTS = {
     "window": "a collision clip needs window_start <= window_end (frames, inclusive)",
     "empty-window": "leave window_start and window_end empty for a non-collision clip, or label it collision",
     "clip": "give the video's file name without its extension",
-    "plain": "a clip is a file in the dataset folder: give its name without any folder part",
+    "plain": "a clip is a file in the dataset folder: give its name without any folder part, "
+             f"at most {CLIP_NAME_MAX} bytes",
     "duplicate": "keep one row per clip (delete or merge the other)",
     "missing": "put the video in the dataset folder or fix the clip name",
     "outside": "frames are 0-based: the last frame of an N-frame video is N-1",
@@ -193,9 +197,9 @@ def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
         try:
             if not clip:
                 raise _bad(line, "", "empty clip name", "clip")
-            if name_problem(clip) is not None:
-                raise _bad(line, clip, f"clip name {name_problem(clip)}, so it would leave the dataset folder",
-                           "plain")
+            if name_problem(clip, CLIP_NAME_MAX) is not None:
+                shown = clip if len(clip) <= 120 else clip[:60] + "..."
+                raise _bad(line, shown, f"clip name {name_problem(clip, CLIP_NAME_MAX)}", "plain")
             if clip in seen:
                 raise _bad(line, "", f"clip {clip!r} is already labelled in row {seen[clip]}", "duplicate")
             seen[clip] = line

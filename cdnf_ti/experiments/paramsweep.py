@@ -57,6 +57,7 @@ from .clipscores import choose_level, correctness_matrix, cross_validated_accura
 from .labels import drop_missing, labels_in_frames, read_labels, validate_dataset
 from .layout import RAIN_CHOICES, trace_path
 from .nested import sweep_nested_cv
+from .parallel import cleaned_up
 from .scoring import Padding, score_clip
 from .sweep import (
     alert_levels as alert_levels,
@@ -241,8 +242,9 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
     tasks = [SweepTask(lab.clip, str(Path(files[lab.clip]).resolve()), name, tuple(s.items()), setting_key(s),
                        cond, str(out), seed, backend, arch, float(downscale), fps, color_order, **(events or {}))
              for s in settings for cond in conditions for lab in labels]
-    done = run_sweep(tasks, workers=workers, scheduler=scheduler, arch=arch,
-                     progress=f"sweep {name}" if progress else False)
+    with cleaned_up(out):  # stale temporary files removed; Ctrl-C and SIGTERM stop the workers cleanly
+        done = run_sweep(tasks, workers=workers, scheduler=scheduler, arch=arch,
+                         progress=f"sweep {name}" if progress else False)
     records = {(t.key, t.condition, t.clip): r for t, r in zip(tasks, done.records)}
     errors = [r for r in done.records if r.get("error")]
     ran, skipped = done.ran, done.reused
