@@ -99,7 +99,8 @@ def _info(args) -> int:
     ok = failed = 0
     for path in _recordings(args.inputs):
         try:
-            src = open_event_source(path, args.sensor_size, args.bin_ms)
+            src = open_event_source(path, args.sensor_size, args.bin_ms, max_gap_s=args.max_gap_s,
+                                    max_span_s=args.max_span_s)
             n_bins = sum(1 for _ in src.counts())
         except UserError as e:
             print(f"error: {e}", file=sys.stderr)

@@ -1,0 +1,139 @@
+"""Hostile event recordings (issue 37): corrupt timestamps, decoder panics, empty recordings, impossible
+header sizes and malformed columns each end in one ``error: <file>: ...`` line, within bounded memory.
+
+The command-line cases run in a child process under an address-space cap (``RLIMIT_AS``), so a
+recording that made the reader allocate for its whole time span fails the test instead of the machine.
+"""
+from __future__ import annotations
+
+import itertools
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+import pytest
+from event_encoders import encode_aedat4, encode_dat, encode_evt2, encode_evt3, random_events, raw_header
+from test_faults import _cli, linux_only
+
+from cdnf_ti.errors import InputError
+from cdnf_ti.events import EVENT_DTYPE, bin_events, open_event_source
+from cdnf_ti.run import main
+
+SIZE = (64, 48)
+FUZZ = Path(__file__).resolve().parent / "data" / "fuzz"
+#: Address-space cap of the child processes: the Taichi runtime alone reserves 1 GiB of it.
+CAP_BYTES = 4 << 30
+
+
+def memory_cap(limit: int = CAP_BYTES):
+    """``preexec_fn`` capping the child's address space at ``limit`` bytes."""
+    def apply() -> None:
+        import resource
+
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+
+    return apply
+
+
+def error_lines(stderr: str) -> list[str]:
+    return [ln for ln in stderr.splitlines() if ln.startswith("error:")]
+
+
+def write_recording(path: Path, ev: np.ndarray) -> Path:
+    """``ev`` written in the format of ``path``'s suffix (``.raw`` EVT 2.0 unless the stem says evt3)."""
+    fmt = path.suffix
+    if fmt == ".npy":
+        np.save(path, ev)
+    elif fmt == ".npz":
+        np.savez(path, t=ev["t"], x=ev["x"], y=ev["y"], p=ev["p"])
+    elif fmt == ".dat":
+        path.write_bytes(encode_dat(ev, SIZE))
+    elif fmt == ".raw" and "evt3" in path.stem:
+        path.write_bytes(raw_header({"evt": "3.0", "geometry": "64x48"}) + encode_evt3(ev))
+    elif fmt == ".raw":
+        path.write_bytes(raw_header({"evt": "2.0", "geometry": "64x48"}) + encode_evt2(ev))
+    elif fmt == ".aedat4":
+        pytest.importorskip("aedat")
+        path.write_bytes(encode_aedat4(ev, SIZE, packet_events=100))
+    elif fmt == ".h5":
+        h5py = pytest.importorskip("h5py")
+        with h5py.File(path, "w") as f:
+            for k in "txyp":
+                f.create_dataset(f"events/{k}", data=ev[k])
+            f.create_dataset("t_offset", data=np.int64(0))
+    return path
+
+
+FORMATS = ["rec.npy", "rec.npz", "rec.dat", "rec_evt2.raw", "rec_evt3.raw", "rec.aedat4", "rec.h5"]
+
+
+def jumped(gap_us: int, at: int = 200, n: int = 400) -> np.ndarray:
+    """A recording whose events from ``at`` on are ``gap_us`` later than they should be."""
+    ev = random_events(n, SIZE, duration_us=500_000, seed=0)
+    ev["t"][at:] += gap_us
+    return ev
+
+
+# -- 1. corrupt timestamps ----------------------------------------------------------------------------------
+def test_bins_are_made_one_at_a_time_whatever_the_gap_between_events():
+    ev = np.zeros(2, dtype=EVENT_DTYPE)
+    ev["t"] = [0, 10**13]  # 10^13 us: 3 * 10^11 bins of 33 ms between the two events
+    tracemalloc.start()
+    try:
+        first = list(itertools.islice(bin_events([ev], SIZE), 3))
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert [int(b.sum()) for b in first] == [1, 0, 0]
+    assert peak < 50 * 2 * SIZE[0] * SIZE[1] * 8  # a few count images, nothing per bin of the span
+
+
+@pytest.mark.parametrize("name", FORMATS)
+def test_a_timestamp_jump_past_max_gap_is_an_error_naming_the_event(name, tmp_path):
+    ev = jumped(5_000_000)  # 5 s, past a limit of 1 s (EVT 3.0's clock cannot jump more than 16.7 s)
+    f = write_recording(tmp_path / name, ev)
+    src = open_event_source(f, SIZE, max_gap_s=1.0)
+    with pytest.raises(InputError, match=f"timestamp jumps from {ev['t'][199]} to {ev['t'][200]} us at event 200"):
+        list(src.counts())
+
+
+def test_a_first_event_far_after_the_recordings_start_is_a_jump(tmp_path):
+    ev = jumped(10**13, at=0)
+    f = write_recording(tmp_path / "late.npy", ev)  # .npy: bin 0 starts at t = 0
+    with pytest.raises(InputError, match=f"timestamp jumps from 0 to {ev['t'][0]} us at event 0"):
+        list(open_event_source(f, SIZE).counts())
+
+
+def test_timestamps_past_max_span_are_an_error_naming_the_event(tmp_path):
+    ev = random_events(100, SIZE, duration_us=1000, seed=1)
+    ev["t"] += np.arange(ev.size) * 2_000_000  # 2 s between events: no gap past 60 s, a span of 200 s
+    f = write_recording(tmp_path / "long.npy", ev)
+    i = int(np.argmax(ev["t"] > 100_000_000))  # the first event more than 100 s after t = 0
+    with pytest.raises(InputError, match=f"timestamp {ev['t'][i]} us at event {i} is .* s after the recording's "
+                                         r"start at 0 us \(at most --max-span-s 100 s\)"):
+        list(open_event_source(f, SIZE, max_span_s=100.0).counts())
+
+
+def test_max_gap_s_admits_a_recording_with_a_long_pause(tmp_path, capsys):
+    ev = jumped(90_000_000)  # a 90 s pause
+    f = write_recording(tmp_path / "pause.npy", ev)
+    assert main(["events", "--info", str(f), "--sensor-size", "64x48"]) == 2
+    assert "at most --max-gap-s 60 s" in capsys.readouterr().err
+    assert main(["events", "--info", str(f), "--sensor-size", "64x48", "--max-gap-s", "120"]) == 0
+    n_bins = int(ev["t"][-1] // (100_000 / 3)) + 1
+    assert f"{ev.size} events" in capsys.readouterr().out and n_bins > 2700
+    assert sum(1 for _ in open_event_source(f, SIZE, max_gap_s=120).counts()) == n_bins
+
+
+@linux_only
+@pytest.mark.parametrize("command", [["run", "--no-progress", "--out", "{tmp}/out"], ["events", "--info"]])
+def test_a_huge_timestamp_jump_is_one_error_line_within_the_memory_cap(command, tmp_path):
+    f = write_recording(tmp_path / "jump.npy", jumped(10**13))
+    argv = [a.format(tmp=tmp_path) for a in command] + [str(f), "--sensor-size", "64x48"]
+    proc = _cli(*argv, timeout=300, preexec_fn=memory_cap())
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr and "MemoryError" not in proc.stderr
+    assert error_lines(proc.stderr) == [f"error: {f}: timestamp jumps from {jumped(0)['t'][199]} to "
+                                        f"{jumped(10**13)['t'][200]} us at event 200 (1e+07 s; at most "
+                                        "--max-gap-s 60 s)"]
+
