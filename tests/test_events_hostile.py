@@ -137,3 +137,42 @@ def test_a_huge_timestamp_jump_is_one_error_line_within_the_memory_cap(command, 
                                         f"{jumped(10**13)['t'][200]} us at event 200 (1e+07 s; at most "
                                         "--max-gap-s 60 s)"]
 
+
+# -- 2. decoder panics ----------------------------------------------------------------------------------------
+PANIC = FUZZ / "events_aedat4_header_panic.aedat4"  # a generated AEDAT4 file with one byte of its header changed
+
+
+@linux_only
+def test_an_aedat4_decoder_panic_is_one_error_line_in_run(tmp_path):
+    pytest.importorskip("aedat")
+    proc = _cli("run", str(PANIC), "--out", str(tmp_path / "out"), "--no-progress", timeout=300,
+                preexec_fn=memory_cap())
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr and "panicked" not in proc.stderr
+    assert [ln for ln in proc.stderr.splitlines() if ln.strip()] == [
+        f"error: {PANIC}: bad AEDAT4 header (the decoder failed: start byte index 11 is not a char boundary; "
+        "it is inside 'n' (bytes 10..12 of string))"]
+
+
+def test_probing_the_sensor_size_of_a_batch_skips_a_panicking_recording(tmp_path, capsys):
+    from cdnf_ti.experiments.clip_tasks import note_inferred_sensor_size
+
+    pytest.importorskip("aedat")
+    good = write_recording(tmp_path / "good.npy", random_events(100, SIZE, seed=2))
+    note_inferred_sensor_size({"bad": PANIC, "good": good}, None)
+    assert "1 event recording(s) state no sensor size (good)" in capsys.readouterr().err
+
+
+# -- 3. empty recordings --------------------------------------------------------------------------------------
+@pytest.mark.parametrize("name", ["rec_evt3.raw", "rec.npy", "rec.dat", "rec.h5"])
+def test_a_recording_without_events_holds_no_events(name, tmp_path):
+    f = write_recording(tmp_path / name, np.zeros(0, dtype=EVENT_DTYPE))
+    with pytest.raises(InputError, match=f"^{f}: holds no events$"):
+        list(open_event_source(f, SIZE).counts())
+
+
+def test_run_on_a_recording_without_events_is_one_error_line_and_exit_2(tmp_path, capsys):
+    f = write_recording(tmp_path / "empty_evt3.raw", np.zeros(0, dtype=EVENT_DTYPE))
+    assert main(["run", str(f), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    assert error_lines(capsys.readouterr().err) == [f"error: {f}: holds no events"]
+    assert not list((tmp_path / "out").glob("*.cdnf.csv"))  # no trace of 0 bins
