@@ -155,7 +155,7 @@ def _run_videos(args, models: list[str], params: dict, out: Path, write_text) ->
                                         max_span_s=args.max_span_s)
             else:
                 src = resolve_input(path, fps=args.fps, color_order=args.color_order)
-            check_frame_size(*src.shape, n_models=len(models), what=str(path))
+            check_frame_size(*src.shape, n_models=len(models), what=str(path), binning=isinstance(src, EventSource))
             if rain_params is not None:
                 check_drops(args.rain_drops, src.shape, what="--rain-drops")
             sources.append((path, src))

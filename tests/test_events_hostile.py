@@ -176,3 +176,75 @@ def test_run_on_a_recording_without_events_is_one_error_line_and_exit_2(tmp_path
     assert main(["run", str(f), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
     assert error_lines(capsys.readouterr().err) == [f"error: {f}: holds no events"]
     assert not list((tmp_path / "out").glob("*.cdnf.csv"))  # no trace of 0 bins
+
+
+# -- 5. one size budget ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("command", [["events", "--info"], ["run", "--no-progress", "--out", "{tmp}/out"]])
+def test_binning_counts_in_the_one_memory_budget_of_info_and_run(command, tmp_path, monkeypatch, capsys):
+    from cdnf_ti import limits
+
+    monkeypatch.setattr(limits, "physical_memory", lambda: 1 << 30)  # half of it, 512 MiB, may be planned
+    side = 1700  # frames of one model fit (1700^2 x 160 B = 0.43 GiB); with the binning's 64 B/px they do not
+    limits.check_frame_size(side, side, n_models=1)
+    f = write_recording(tmp_path / "rec.npy", random_events(100, SIZE, seed=3))
+    argv = [a.format(tmp=tmp_path) for a in command] + [str(f), "--sensor-size", f"{side}x{side}"]
+    assert main(argv) == 2
+    assert error_lines(capsys.readouterr().err) == [
+        f"error: {f}: frames of {side}x{side} px need about 0.6 GB for binning events and 1 model(s), more than "
+        "half of this machine's 1.0 GB of memory; largest square frame here: about 1548x1548 px"]
+
+
+def test_the_emulator_counts_its_state_in_the_memory_budget(tmp_path, monkeypatch, capsys):
+    from cdnf_ti import limits
+
+    monkeypatch.setattr(limits, "physical_memory", lambda: 1 << 30)
+    frames = tmp_path / "big.npy"
+    np.save(frames, np.zeros((2, 1500, 1500), dtype=np.uint8))  # 1500^2 x (160 + 96) B = 0.54 GiB
+    assert main(["events", str(frames), "--out", str(tmp_path / "ev.npy"), "--no-progress"]) == 2
+    assert error_lines(capsys.readouterr().err) == [
+        f"error: {frames}: frames of 1500x1500 px need about 0.5 GB for emulating events, more than half of this "
+        "machine's 1.0 GB of memory; largest square frame here: about 1448x1448 px"]
+
+
+# -- 12. impossible header sizes -------------------------------------------------------------------------------
+@pytest.mark.parametrize("size", [(0, 0), (100_000, 100_000)])
+def test_an_impossible_sensor_size_in_a_header_is_named_as_the_headers_fault(size, tmp_path, capsys):
+    f = tmp_path / "rec.dat"
+    f.write_bytes(encode_dat(random_events(50, SIZE, seed=4), size))
+    assert main(["events", "--info", str(f)]) == 2
+    assert error_lines(capsys.readouterr().err) == [
+        f"error: {f}: the header states a sensor size of {size[0]}x{size[1]}, which no sensor has (each side 1 to "
+        "16384 px): a corrupt header? give --sensor-size WxH to override it"]
+    assert main(["events", "--info", str(f), "--sensor-size", "64x48"]) == 0
+
+
+# -- 13. NumPy's wording -----------------------------------------------------------------------------------------
+def test_random_bytes_in_an_npz_are_not_an_archive(tmp_path):
+    f = tmp_path / "rec.npz"
+    f.write_bytes(np.random.default_rng(5).bytes(2000))
+    with pytest.raises(InputError, match=r"not a NumPy \.npz archive") as e:
+        list(open_event_source(f, SIZE).counts())
+    assert "pickle" not in str(e.value)
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # NumPy's "invalid value encountered in cast" fails the test
+def test_a_nan_timestamp_names_the_event(tmp_path):
+    ev = random_events(100, SIZE, seed=6)
+    a = np.zeros(ev.size, dtype=[("t", "<f8"), ("x", "<u2"), ("y", "<u2"), ("p", "u1")])
+    for k in "txyp":
+        a[k] = ev[k]
+    a["t"][37] = np.nan
+    np.save(tmp_path / "rec.npy", a)
+    with pytest.raises(InputError, match="event 37 has timestamp nan, not a whole number of µs"):
+        list(open_event_source(tmp_path / "rec.npy", SIZE).counts())
+
+
+def test_a_negative_x_names_the_event_instead_of_wrapping(tmp_path):
+    ev = random_events(100, SIZE, seed=7)
+    a = np.zeros(ev.size, dtype=[("t", "<i8"), ("x", "<i2"), ("y", "<i2"), ("p", "i1")])
+    for k in "txyp":
+        a[k] = ev[k]
+    a["x"][12] = -3  # as uint16: 65533
+    np.save(tmp_path / "rec.npy", a)
+    with pytest.raises(InputError, match="event 12 has x=-3, outside 0..65535"):
+        list(open_event_source(tmp_path / "rec.npy", SIZE).counts())

@@ -183,7 +183,7 @@ def to_events(t, x, y, p, path: str = "", start: int = 0) -> np.ndarray:
         bad = ~np.isfinite(t) | (np.abs(t) >= 2.0 ** 63)
         if bad.any():
             i = int(np.argmax(bad))
-            raise InputError(path, f"event {start + i} has timestamp {t[i]!r}, not a whole number of µs")
+            raise InputError(path, f"event {start + i} has timestamp {float(t[i])}, not a whole number of µs")
         out["t"] = np.rint(t)
     elif t.dtype.kind in "iub":
         if t.dtype.kind == "u" and t.dtype.itemsize == 8 and t.size and int(t.max()) >= 2 ** 63:
@@ -199,7 +199,7 @@ def to_events(t, x, y, p, path: str = "", start: int = 0) -> np.ndarray:
                 raise InputError(path, f"column {name} must hold whole pixel numbers, got {v.dtype} values")
         if v.size and (v.min() < 0 or v.max() > 65535):
             i = int(np.argmax((v < 0) | (v > 65535)))
-            raise InputError(path, f"event {start + i} has {name}={v[i]!r}, outside 0..65535 (a pixel coordinate "
+            raise InputError(path, f"event {start + i} has {name}={v[i].item()}, outside 0..65535 (a pixel coordinate "
                                    "cannot be negative)")
         out[name] = v
     out["p"] = np.asarray(p) > 0

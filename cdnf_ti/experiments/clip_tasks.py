@@ -221,7 +221,8 @@ def run_clip_task(task: ClipTask) -> list[dict]:
     try:
         src = _open(task)
         try:
-            check_frame_size(*src.shape, n_models=len(task.models), what=str(task.path))
+            check_frame_size(*src.shape, n_models=len(task.models), what=str(task.path),
+                             binning=isinstance(src, EventSource))
         except UserError as e:  # frames smaller than the widest kernel: that clip's error rows
             raise InputError(task.path, str(e).split(": ", 1)[-1]) from None
     except InputError as e:
