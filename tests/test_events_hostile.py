@@ -6,6 +6,7 @@ recording that made the reader allocate for its whole time span fails the test i
 """
 from __future__ import annotations
 
+import csv
 import itertools
 import tracemalloc
 from pathlib import Path
@@ -178,6 +179,29 @@ def test_run_on_a_recording_without_events_is_one_error_line_and_exit_2(tmp_path
     assert not list((tmp_path / "out").glob("*.cdnf.csv"))  # no trace of 0 bins
 
 
+
+def test_a_record_of_no_frames_is_an_error_row_never_a_true_negative():
+    from cdnf_ti.experiments.dataset import build_row
+    from cdnf_ti.experiments.labels import ClipLabel
+    from cdnf_ti.experiments.scoring import Padding
+
+    label = ClipLabel("quiet", "non-collision", False, None, None, None, 2)
+    row = build_row(label, "cdnf", "clean", {"frames": 0, "fps": 30.0, "first_alert": None, "source": "quiet.raw",
+                                             "error": ""}, Padding())
+    assert row["error"] == "quiet.raw: holds no frames" and not row["outcome"]
+
+
+def test_a_clip_figure_draws_an_empty_trace_as_no_trace(tmp_path):
+    from cdnf_ti.experiments.figures import plot_clip
+    from cdnf_ti.experiments.labels import ClipLabel
+    from cdnf_ti.models.base import Trace
+
+    empty = Trace("cdnf", "I_v", 0.5, np.zeros(0), np.zeros(0, bool), np.zeros(0, bool), {})
+    label = ClipLabel("quiet", "non-collision", False, None, None, None, 2)
+    png = plot_clip(tmp_path / "quiet.png", label, {("cdnf", "clean"): empty}, ["cdnf"], ["clean"])
+    assert png.is_file() and png.stat().st_size > 0
+
+
 # -- 5. one size budget ------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("command", [["events", "--info"], ["run", "--no-progress", "--out", "{tmp}/out"]])
 def test_binning_counts_in_the_one_memory_budget_of_info_and_run(command, tmp_path, monkeypatch, capsys):
@@ -248,3 +272,31 @@ def test_a_negative_x_names_the_event_instead_of_wrapping(tmp_path):
     np.save(tmp_path / "rec.npy", a)
     with pytest.raises(InputError, match="event 12 has x=-3, outside 0..65535"):
         list(open_event_source(tmp_path / "rec.npy", SIZE).counts())
+
+
+# -- the issue's acceptance test -------------------------------------------------------------------------------
+@linux_only
+def test_a_dataset_of_one_good_and_three_hostile_recordings_scores_the_good_one_and_reports(tmp_path):
+    pytest.importorskip("aedat")
+    data = tmp_path / "data"
+    data.mkdir()
+    assert main(["events", "stim:dark_looming?width=64&height=48&duration=0.8", "--out", str(data / "loom.npy"),
+                 "--no-progress"]) == 0  # the good clip: no sensor size in the file, so every file is probed
+    (data / "panic.aedat4").write_bytes(PANIC.read_bytes())
+    write_recording(data / "empty_evt3.raw", np.zeros(0, dtype=EVENT_DTYPE))
+    write_recording(data / "span.npy", jumped(10**13))
+    (data / "labels.csv").write_text("clip,label,window_start,window_end\nloom,collision,10,23\n"
+                                     "panic,non-collision,,\nempty_evt3,non-collision,,\nspan,non-collision,,\n")
+    out = tmp_path / "out"
+    proc = _cli("dataset", str(data), "--out", str(out), "--workers", "0", "--no-progress", timeout=600,
+                preexec_fn=memory_cap())
+    assert proc.returncode == 1, proc.stderr
+    assert "Traceback" not in proc.stderr and "panicked" not in proc.stderr
+    with open(out / "results.csv", newline="") as f:
+        rows = {r["clip"]: r for r in csv.DictReader(f)}
+    assert not rows["loom"]["error"] and rows["loom"]["outcome"]
+    assert rows["panic"]["error"].startswith(f"{data / 'panic.aedat4'}: bad AEDAT4 header (the decoder failed")
+    assert rows["empty_evt3"]["error"] == f"{data / 'empty_evt3.raw'}: holds no events"
+    assert rows["span"]["error"].startswith(f"{data / 'span.npy'}: timestamp jumps from")
+    assert all(not rows[c]["outcome"] for c in ("panic", "empty_evt3", "span"))  # never scored (a TN)
+    assert (out / "report.html").is_file() and (out / "summary.md").is_file()
