@@ -297,8 +297,12 @@ def _open_hdf5(path: str) -> EventFile:
             t_start = int(np.asarray(f["t_offset"][()]).item()) if "t_offset" in f else 0
             if "width" in f.attrs and "height" in f.attrs:
                 size = (int(f.attrs["width"]), int(f.attrs["height"]))
-    except OSError as e:
-        raise InputError(path, f"cannot read as HDF5 ({e})".splitlines()[0]) from None
+    except InputError:
+        raise
+    except BaseException as e:  # noqa: BLE001 - HDF5's errors on a corrupt file come as many types
+        if not decoder_failure(e):
+            raise
+        raise InputError(path, f"cannot read as HDF5 ({type(e).__name__}: {e})".splitlines()[0]) from None
     if len(set(lengths.values())) > 1:
         raise InputError(path, "events/t, x, y, p differ in length (" +
                          ", ".join(f"{k} {v}" for k, v in lengths.items()) + ")")
@@ -310,7 +314,9 @@ def _open_hdf5(path: str) -> EventFile:
             for i in range(0, n, CHUNK_EVENTS):
                 try:
                     cols = [g[k][i:i + CHUNK_EVENTS] for k in _FIELDS]
-                except OSError as e:
+                except BaseException as e:  # noqa: BLE001 - as on opening
+                    if not decoder_failure(e):
+                        raise
                     raise InputError(path, f"cannot read events {i} to {min(n, i + CHUNK_EVENTS) - 1} "
                                            f"(corrupt or truncated HDF5: {e})".splitlines()[0]) from None
                 if cols[0].dtype.kind in "iu":
