@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from event_encoders import encode_aedat4, encode_dat, encode_evt2, encode_evt3, random_events, raw_header
+from test_events_binning import chunked, histogram
 from test_faults import _cli, linux_only
 
 from cdnf_ti.errors import InputError
@@ -87,6 +88,14 @@ def test_bins_are_made_one_at_a_time_whatever_the_gap_between_events():
         tracemalloc.stop()
     assert [int(b.sum()) for b in first] == [1, 0, 0]
     assert peak < 50 * 2 * SIZE[0] * SIZE[1] * 8  # a few count images, nothing per bin of the span
+
+
+
+def test_sparse_events_bin_as_a_per_event_histogram_whatever_the_chunking():
+    ev = random_events(300, SIZE, duration_us=1_000_000, seed=8)  # 1 ms bins: most chunks span more bins
+    want = histogram(ev, SIZE, 1.0, int(ev["t"][-1] // 1000) + 1, 0.0)  # than they have events
+    for chunk in (7, 50, ev.size):
+        np.testing.assert_array_equal(np.stack(list(bin_events(chunked(ev, chunk), SIZE, bin_ms=1.0, t0=0.0))), want)
 
 
 @pytest.mark.parametrize("name", FORMATS)

@@ -180,8 +180,12 @@ def check_time_jumps(t: np.ndarray, before: float, origin: float, start: int, pa
     Notes
     -----
     Works on the running maximum of ``t`` (a timestamp going backwards is no jump), in float64
-    so that the differences of any int64 timestamps are exact enough and never overflow.
+    so that the differences of any int64 timestamps are exact enough and never overflow. A chunk
+    whose largest timestamp is within both limits of ``before`` and ``origin`` is passed at once.
     """
+    top = float(t.max())
+    if top - float(before) <= max_gap_s * 1e6 and top - float(origin) <= max_span_s * 1e6:
+        return  # no step of the running maximum can be larger than its whole rise (the usual case: O(1) more)
     peak = np.maximum(np.maximum.accumulate(t).astype(np.float64), float(before))
     steps = np.diff(peak, prepend=float(before))
     i = int(np.argmax(steps))
@@ -235,8 +239,9 @@ def bin_events(chunks: Iterable[np.ndarray], sensor_size: tuple[int, int], bin_m
 
     Notes
     -----
-    Per chunk: each event's bin ``k = floor((max(t up to it) - t0) / b)``, cut where ``k``
-    changes, and each bin's part counted by one ``np.bincount`` over ``p H W + y W + x``.
+    Per chunk: the running maximum of ``t`` (the timestamps themselves when in order) is cut
+    into bins (:func:`_bin_parts`), and each bin's part counted by one ``np.bincount`` over
+    ``p H W + y W + x``.
     Memory: a few int64 arrays of the chunk's length and three count images (``2 H W`` int64
     each: the bin being filled, one part's counts, the bin handed on); the empty bins between
     two events are made one at a time as they are taken, so a gap of any length allocates
@@ -261,27 +266,45 @@ def bin_events(chunks: Iterable[np.ndarray], sensor_size: tuple[int, int], bin_m
             if latest is not None:
                 np.maximum(t, latest, out=t)
         latest = int(t[-1])
-        k = np.floor((t - t0) / bin_us).astype(np.int64)
-        np.maximum(k, max(current, 0), out=k)  # before bin 0 or in a bin handed on: the open bin
-        starts = (np.flatnonzero(k[1:] != k[:-1]) + 1).tolist()
         flat = ev["y"].astype(np.int64)
         flat *= w
         flat += ev["x"]
         flat += ev["p"].astype(np.int64) * plane
-        for s, e in zip([0] + starts, starts + [n]):
-            kk = int(k[s])
+        for kk, s, e in _bin_parts(t, t0, bin_us, max(current, 0)):
             if kk != current:
                 if acc is not None:
                     yield acc.reshape(2, h, w)
                 yield from _empty_bins(kk - current - 1, (2, h, w))
                 current, acc = kk, None
-            counts = np.bincount(flat[s:e], minlength=2 * plane)
-            if acc is None:
-                acc = counts
-            else:
-                acc += counts
+            if e > s or acc is None:
+                counts = np.bincount(flat[s:e], minlength=2 * plane)
+                if acc is None:
+                    acc = counts
+                else:
+                    acc += counts
     if acc is not None:
         yield acc.reshape(2, h, w)
+
+
+def _bin_parts(t: np.ndarray, t0: float, bin_us: float, k_open: int) -> Iterator[tuple[int, int, int]]:
+    """``(k, start, end)``: the events ``t[start:end]`` that fall in bin ``k``, bins in order.
+
+    ``t`` (µs, non-decreasing) is cut at the bin edges with ``searchsorted`` when the chunk spans
+    fewer bins than it has events (each bin is a part, empty ones too), else where its events' bin
+    index changes (only bins with events; the caller makes the empty ones between). Events before
+    bin ``k_open`` count in it. Memory: O(len(t)) whatever the span.
+    """
+    n = t.shape[0]
+    k_first = max(int(np.floor((int(t[0]) - t0) / bin_us)), k_open)
+    k_last = max(int(np.floor((int(t[-1]) - t0) / bin_us)), k_first)
+    if k_last - k_first < n:
+        cuts = np.searchsorted(t, t0 + np.arange(k_first + 1, k_last + 1) * bin_us, side="left").tolist()
+        yield from zip(range(k_first, k_last + 1), [0] + cuts, cuts + [n])
+        return
+    k = np.floor((t - t0) / bin_us).astype(np.int64)
+    np.maximum(k, k_open, out=k)
+    starts = (np.flatnonzero(k[1:] != k[:-1]) + 1).tolist()
+    yield from ((int(k[s]), s, e) for s, e in zip([0] + starts, starts + [n]))
 
 
 def _empty_bins(n: int, shape: tuple[int, int, int]) -> Iterator[np.ndarray]:
