@@ -49,7 +49,7 @@ from pathlib import Path
 from typing import Sequence
 
 from .errors import UserError
-from .events.binning import DEFAULT_BIN_MS, DEFAULT_EVENT_THRESHOLD
+from .events.binning import DEFAULT_BIN_MS, DEFAULT_EVENT_THRESHOLD, DEFAULT_MAX_GAP_S, DEFAULT_MAX_SPAN_S
 from .events.readers import parse_sensor_size
 from .limits import MAX_DROPS
 from .models import MODELS, get_model_class
@@ -123,7 +123,8 @@ def sensor_size_arg(text: str) -> tuple[int, int]:
 
 
 def add_event_options(ap: argparse.ArgumentParser) -> None:
-    """``--sensor-size``, ``--bin-ms``, ``--event-threshold``: how an event recording becomes model input.
+    """``--sensor-size``, ``--bin-ms``, ``--event-threshold``: how an event recording becomes model input;
+    ``--max-gap-s``, ``--max-span-s``: the limits past which a timestamp is taken as corrupt.
 
     Read them back with :func:`event_options_of`.
     """
@@ -136,14 +137,22 @@ def add_event_options(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--event-threshold", type=positive_float, default=DEFAULT_EVENT_THRESHOLD, metavar="C",
                     help="the sensor's log-contrast threshold C: n events at a pixel in a bin give the models a "
                          "contrast min(1, n C) (default: %(default)s); for 'events VIDEO' the emulated threshold")
+    ap.add_argument("--max-gap-s", type=positive_float, default=DEFAULT_MAX_GAP_S, metavar="S",
+                    help="an event more than S seconds after every event before it is a corrupt timestamp, an "
+                         "error (default: %(default)g; raise it for a recording with long pauses)")
+    ap.add_argument("--max-span-s", type=positive_float, default=DEFAULT_MAX_SPAN_S, metavar="S",
+                    help="an event more than S seconds after the recording's start is a corrupt timestamp, an "
+                         "error (default: %(default)g, 24 h)")
 
 
 def event_options_of(args: argparse.Namespace) -> dict:
-    """``{"sensor_size", "bin_ms", "event_threshold"}`` from the options of :func:`add_event_options`
-    (the defaults where the command has none)."""
+    """``{"sensor_size", "bin_ms", "event_threshold", "max_gap_s", "max_span_s"}`` from the options of
+    :func:`add_event_options` (the defaults where the command has none)."""
     return {"sensor_size": getattr(args, "sensor_size", None),
             "bin_ms": float(getattr(args, "bin_ms", DEFAULT_BIN_MS)),
-            "event_threshold": float(getattr(args, "event_threshold", DEFAULT_EVENT_THRESHOLD))}
+            "event_threshold": float(getattr(args, "event_threshold", DEFAULT_EVENT_THRESHOLD)),
+            "max_gap_s": float(getattr(args, "max_gap_s", DEFAULT_MAX_GAP_S)),
+            "max_span_s": float(getattr(args, "max_span_s", DEFAULT_MAX_SPAN_S))}
 
 
 def given_event_options(args: argparse.Namespace) -> list[str]:
@@ -152,7 +161,9 @@ def given_event_options(args: argparse.Namespace) -> list[str]:
     opts = event_options_of(args)
     return [o for o, changed in (("--sensor-size", opts["sensor_size"] is not None),
                                  ("--bin-ms", opts["bin_ms"] != DEFAULT_BIN_MS),
-                                 ("--event-threshold", opts["event_threshold"] != DEFAULT_EVENT_THRESHOLD))
+                                 ("--event-threshold", opts["event_threshold"] != DEFAULT_EVENT_THRESHOLD),
+                                 ("--max-gap-s", opts["max_gap_s"] != DEFAULT_MAX_GAP_S),
+                                 ("--max-span-s", opts["max_span_s"] != DEFAULT_MAX_SPAN_S))
             if changed]
 
 

@@ -157,10 +157,11 @@ def _run_videos(args, models: list[str], params: dict, out: Path, write_text) ->
             if is_event_file(path):
                 if rain_params is not None:
                     raise InputError(path, "is an event recording; --rain applies to frames only")
-                src = open_event_source(path, args.sensor_size, args.bin_ms)
+                src = open_event_source(path, args.sensor_size, args.bin_ms, max_gap_s=args.max_gap_s,
+                                        max_span_s=args.max_span_s)
             else:
                 src = resolve_input(path, fps=args.fps, color_order=args.color_order)
-            check_frame_size(*src.shape, n_models=len(models), what=str(path))
+            check_frame_size(*src.shape, n_models=len(models), what=str(path), binning=isinstance(src, EventSource))
             if rain_params is not None:
                 check_drops(args.rain_drops, src.shape, what="--rain-drops")
             sources.append((path, src))
@@ -233,6 +234,10 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
             msg = str(err) if isinstance(err, UserError) else f"{type(err).__name__}: {err}"
             print(f"error: {path} [{name}]: {msg}".splitlines()[0], file=sys.stderr)
             rows.append(_error_row(index, path, clip, name, condition, msg))
+            continue
+        if trace.n_frames == 0:  # a source that yielded nothing (an event recording says so itself)
+            print(f"error: {path}: holds no frames", file=sys.stderr)
+            rows.append(_error_row(index, path, clip, name, condition, "holds no frames"))
             continue
         ran += 1
         trace_name = trace_file_name(clip, name, condition)

@@ -37,6 +37,7 @@ from ..cli_common import (
 from ..errors import UserError
 from ..frames import iter_grey
 from ..inputs import STIM_PREFIX, parse_stim_spec, resolve_input, stimulus_label
+from ..limits import check_frame_size
 from ..paths import inside
 from .emulator import EmulatorParams, emulate
 from .readers import is_event_file
@@ -100,7 +101,9 @@ def _info(args) -> int:
     ok = failed = 0
     for path in _recordings(args.inputs):
         try:
-            src = open_event_source(path, args.sensor_size, args.bin_ms)
+            src = open_event_source(path, args.sensor_size, args.bin_ms, max_gap_s=args.max_gap_s,
+                                    max_span_s=args.max_span_s)
+            check_frame_size(*src.shape, n_models=1, what=path, binning=True)  # as `run` would with one model
             n_bins = sum(1 for _ in src.counts())
         except UserError as e:
             print(f"error: {e}", file=sys.stderr)
@@ -151,6 +154,7 @@ def _emulate(args) -> int:
         try:
             src = resolve_input(spec, fps=args.fps, color_order=args.color_order)
             h, w = src.shape
+            check_frame_size(h, w, n_models=0, what=str(spec), emulating=True)
             chunks = emulate(iter_grey(src), src.fps, params, seed=args.seed)
             if not args.no_progress:
                 chunks = tqdm(chunks, total=None if src.n_frames is None else max(src.n_frames - 1, 0),

@@ -64,6 +64,9 @@ def build_row(label: ClipLabel, model: str, condition: str, meta: dict | None, p
     if meta.get("error"):
         row["error"] = meta["error"]
         return row
+    if meta.get("frames") == 0:  # nothing was seen: not a correct non-collision
+        row["error"] = f"{meta.get('source') or label.clip}: holds no frames"
+        return row
     fps = float(meta.get("fps") or 30.0)
     fa = meta.get("first_alert")
     sc = score_clip(fa, label, fps, padding)

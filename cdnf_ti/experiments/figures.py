@@ -99,6 +99,7 @@ def plot_clip(path: str | os.PathLike, label: "ClipLabel", traces: Mapping[tuple
         Shows the padded window (lighter) around the labelled one.
     """
     plt = _plt()
+    traces = {k: tr for k, tr in traces.items() if tr is not None and tr.n_frames}  # an empty trace: no trace
     panels: list[tuple[str, str]] = []
     for m in models:
         panels.append((m, "output"))

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
@@ -44,15 +45,25 @@ SWEEP_COLUMNS = ("model", "condition", "parameter", "value", "is_default", "TP",
 
 
 def load_traces(run: "DatasetRun") -> dict:
-    """The saved traces of every successful row: (clip, model, condition) -> Trace."""
+    """The saved traces of every successful row: (clip, model, condition) -> Trace.
+
+    A trace that is missing, unreadable or holds no frame is left out (its figure panel says
+    "no trace"); the reports are written all the same.
+    """
     traces = {}
     for r in run.rows:
         if r.get("error"):
             continue
         p = trace_path(run.out, r["condition"], r["clip"], r["model"])
         thr = r.get("threshold")
-        traces[(r["clip"], r["model"], r["condition"])] = Trace.from_csv(
-            p, model=r["model"], threshold=None if thr in ("", None) else float(thr))
+        try:
+            tr = Trace.from_csv(p, model=r["model"], threshold=None if thr in ("", None) else float(thr))
+        except (OSError, ValueError, KeyError, IndexError) as e:
+            print(f"warning: {p}: cannot read the trace ({e}); left out of the figures and the threshold sweep"
+                  .splitlines()[0], file=sys.stderr)
+            continue
+        if tr.n_frames:
+            traces[(r["clip"], r["model"], r["condition"])] = tr
     return traces
 
 
