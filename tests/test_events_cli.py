@@ -90,3 +90,18 @@ def test_info_on_a_folder_reports_every_recording_in_it(tmp_path, capsys):
     assert main(["events", "--info", str(tmp_path), "--sensor-size", "64x48"]) == 0
     out = capsys.readouterr().out
     assert out.count(": npy, 64x48 (--sensor-size)") == 2 and "frames.npy" not in out
+
+
+def test_events_progress_in_a_log_is_one_line_per_input(tmp_path, capsys):
+    """stderr is not a terminal here (captured): no carriage-return bar, one line per input as the other commands."""
+    assert main(["events", STIM, "stim:light_looming?size=48&duration=0.5", "--out", str(tmp_path / "ev")]) == 0
+    err = capsys.readouterr().err
+    assert "\r" not in err
+    lines = [ln for ln in err.splitlines() if ln.startswith("[")]
+    assert [ln.split("]")[0] for ln in lines] == ["[1/2", "[2/2"]
+    assert "dark_looming" in lines[0] and "light_looming" in lines[1]
+
+
+def test_events_no_progress_writes_no_progress_lines(tmp_path, capsys):
+    assert main(["events", STIM, "--out", str(tmp_path / "ev"), "--no-progress"]) == 0
+    assert not [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("[")]

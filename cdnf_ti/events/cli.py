@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 from typing import Sequence
 
@@ -35,6 +36,7 @@ from ..cli_common import (
     unique_names,
 )
 from ..errors import UserError
+from ..experiments.parallel import _isatty
 from ..frames import iter_grey
 from ..inputs import STIM_PREFIX, parse_stim_spec, resolve_input, stimulus_label
 from .emulator import EmulatorParams, emulate
@@ -146,12 +148,15 @@ def _emulate(args) -> int:
         raise UserError(str(e)) from None
     outputs = _outputs(args)
     ok = failed = 0
-    for spec, out in zip(args.inputs, outputs):
+    # progress: a frame bar in a terminal; in a log (stderr not a terminal) one line per finished input
+    bar, log = (not args.no_progress and _isatty(sys.stderr)), (not args.no_progress and not _isatty(sys.stderr))
+    for k, (spec, out) in enumerate(zip(args.inputs, outputs), start=1):
+        t0 = time.perf_counter()
         try:
             src = resolve_input(spec, fps=args.fps, color_order=args.color_order)
             h, w = src.shape
             chunks = emulate(iter_grey(src), src.fps, params, seed=args.seed)
-            if not args.no_progress:
+            if bar:
                 chunks = tqdm(chunks, total=None if src.n_frames is None else max(src.n_frames - 1, 0),
                               desc=f"{spec} -> events", unit="frame", leave=False)
             counts = [0, 0]  # events, ON events
@@ -167,6 +172,10 @@ def _emulate(args) -> int:
             print(f"error: {e}", file=sys.stderr)
             failed += 1
             continue
+        finally:
+            if log:
+                print(f"[{k}/{len(outputs)}] {spec} -> {out}: {time.perf_counter() - t0:.1f} s", file=sys.stderr,
+                      flush=True)
         n, n_on = counts
         print(f"{spec} -> {out}: {n} events ({n_on} ON, {n - n_on} OFF), {w}x{h}, "
               f"{src.fps:g} fps")
