@@ -34,7 +34,7 @@ from .clip_tasks import (
     run_clip_task as run_clip_task,
     run_clips,
 )
-from .labels import ClipLabel, drop_missing, labels_in_frames, read_labels, unlabelled_videos, validate_dataset
+from .labels import ClipLabel, load_labels, unlabelled_videos
 from .layout import (
     CONDITIONS as CONDITIONS,
     RAIN_CHOICES as RAIN_CHOICES,
@@ -144,11 +144,7 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
         raise UserError(f"--rain must be one of {', '.join(RAIN_CHOICES)}, got {rain!r}")
     folder = Path(folder)
     labels_path = Path(labels_path) if labels_path is not None else folder / "labels.csv"
-    labels = read_labels(labels_path)
-    if skip_missing:
-        labels, _ = drop_missing(labels, folder)
-    files = validate_dataset(labels, folder, labels_path)
-    labels = labels_in_frames(labels, files, fps, (events or {}).get("bin_ms"), labels_path)
+    labels, files = load_labels(labels_path, folder, fps, (events or {}).get("bin_ms"), skip_missing)
     conditions = frames_only_conditions(files, RAIN_CHOICES[rain], folder)
     note_inferred_sensor_size(files, (events or {}).get("sensor_size"))
     models = list(dict.fromkeys(models))
