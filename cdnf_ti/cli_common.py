@@ -184,17 +184,30 @@ def rain_word(text: str) -> str:
 
 
 def rain_flag_argv(argv: list[str]) -> list[str]:
-    """``--rain`` not followed by a rain word becomes ``--rain=on`` (so the next word stays an input)."""
+    """``--rain`` followed by an input (or an option, or nothing) becomes ``--rain=on``, so the next word
+    stays an input.
+
+    The next word is taken as ``--rain``'s value, so that a wrong one (``--rain maybe``) is reported with
+    the valid words, unless it looks like an input: an existing path, a ``stim:`` spec, or a name with a
+    dot or a path separator (``clip.mp4``, ``videos/``).
+    """
     words = set(RAIN_WORDS) | set(OLD_RAIN_WORDS)
     out = []
     for i, a in enumerate(argv):
         if a == "--":
             return out + argv[i:]
-        if a == "--rain" and (i + 1 >= len(argv) or argv[i + 1].strip().lower() not in words):
+        if a == "--rain" and (i + 1 >= len(argv) or (argv[i + 1].strip().lower() not in words
+                                                      and _looks_like_input(argv[i + 1]))):
             out.append("--rain=on")
         else:
             out.append(a)
     return out
+
+
+def _looks_like_input(word: str) -> bool:
+    """Whether a word after ``--rain`` is an input or an option rather than a (wrong) rain word."""
+    return (word.startswith("-") or word.startswith("stim:") or any(c in word for c in "./\\")
+            or Path(word).exists())
 
 
 def add_rain_options(ap: argparse.ArgumentParser, default: str = "off", flag: bool = True,
