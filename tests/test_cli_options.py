@@ -366,7 +366,9 @@ def test_rain_options_without_rain_get_a_note(looming_npy, tmp_path, capsys):
 @pytest.mark.parametrize("command", [[], ["dataset"]], ids=["run", "dataset"])
 def test_a_wrong_rain_word_lists_the_valid_choices(command, looming_npy, tmp_path, capsys):
     target = [str(tmp_path)] if command else [str(looming_npy)]
-    assert main(command + target + ["--rain", "maybe", "--out", str(tmp_path / "o")]) == 2
+    with pytest.raises(SystemExit) as e:
+        main(command + target + ["--rain", "maybe", "--out", str(tmp_path / "o")])
+    assert e.value.code == 2
     err = capsys.readouterr().err
     assert err.count("error:") == 1 and "'maybe'" in err and "on, off, both" in err
     assert not (tmp_path / "o").exists()
