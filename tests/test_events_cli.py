@@ -105,3 +105,24 @@ def test_events_progress_in_a_log_is_one_line_per_input(tmp_path, capsys):
 def test_events_no_progress_writes_no_progress_lines(tmp_path, capsys):
     assert main(["events", STIM, "--out", str(tmp_path / "ev"), "--no-progress"]) == 0
     assert not [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("[")]
+
+
+def test_an_emulated_video_has_one_bin_fewer_than_frames_and_says_how_they_map(tmp_path, capsys):
+    """Events come from changes between frames: n frames give n - 1 bins, bin k holding the change from frame
+    k to k + 1 (a frame model's frame k + 1); the line says so, and a step change at frame 5 lands in bin 4."""
+    frames = np.full((12, 32, 32), 60, np.uint8)
+    frames[5:, 8:24, 8:24] = 200  # one change: frame 4 -> 5
+    np.save(tmp_path / "step.npy", frames)
+    out = tmp_path / "step_events.npy"
+    assert main(["events", str(tmp_path / "step.npy"), "--out", str(out), "--no-progress"]) == 0
+    line = capsys.readouterr().out
+    assert "12 frames -> 11 bins" in line and "frames s..e are bins s-1..e-1" in line
+    counts = [int(on.sum() + off.sum()) for on, off in open_event_source(out, (32, 32)).contrast(0.2)]
+    assert [k for k, c in enumerate(counts) if c] == [4]
+
+
+def test_a_video_changing_on_every_frame_emulates_to_one_bin_fewer_than_its_frames(tmp_path, capsys):
+    out = tmp_path / "dl.npy"
+    assert main(["events", STIM, "--out", str(out), "--no-progress"]) == 0  # 16 frames, a change on each
+    assert "16 frames -> 15 bins" in capsys.readouterr().out
+    assert sum(1 for _ in open_event_source(out).contrast(0.2)) == 15

@@ -138,6 +138,17 @@ def _outputs(args) -> list[Path]:
     return [Path(out) / f"{n}{ext}" for n in names]
 
 
+def bins_note(n_frames: int, fps: float) -> str:
+    """How an emulated video's frames map to bins one frame long (``--bin-ms 1000/fps``).
+
+    Events come from the changes between frames, so ``n`` frames give ``n - 1`` bins: bin ``k``
+    holds the change from frame ``k`` to ``k + 1``, which a frame model sees at frame ``k + 1``. A
+    window of frames ``s..e`` (a labels file made for the video) is bins ``s - 1 .. e - 1``.
+    """
+    return (f"{n_frames} frames -> {max(n_frames - 1, 0)} bins of {1000.0 / fps:.4g} ms (bin k = the change from "
+            "frame k to k+1: frames s..e are bins s-1..e-1)")
+
+
 def _emulate(args) -> int:
     c = args.event_threshold
     try:
@@ -155,7 +166,14 @@ def _emulate(args) -> int:
         try:
             src = resolve_input(spec, fps=args.fps, color_order=args.color_order)
             h, w = src.shape
-            chunks = emulate(iter_grey(src), src.fps, params, seed=args.seed)
+            frames = [0]  # frames read
+
+            def counted_frames(src=src, frames=frames):
+                for g in iter_grey(src):
+                    frames[0] += 1
+                    yield g
+
+            chunks = emulate(counted_frames(), src.fps, params, seed=args.seed)
             if bar:
                 chunks = tqdm(chunks, total=None if src.n_frames is None else max(src.n_frames - 1, 0),
                               desc=f"{spec} -> events", unit="frame", leave=False)
@@ -178,7 +196,7 @@ def _emulate(args) -> int:
                       flush=True)
         n, n_on = counts
         print(f"{spec} -> {out}: {n} events ({n_on} ON, {n - n_on} OFF), {w}x{h}, "
-              f"{src.fps:g} fps")
+              f"{src.fps:g} fps; {bins_note(frames[0], src.fps)}")
         ok += 1
     if ok and failed:
         return EXIT_FAILED
