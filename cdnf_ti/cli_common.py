@@ -54,7 +54,7 @@ from .events.readers import parse_sensor_size
 from .limits import MAX_DROPS
 from .models import MODELS, get_model_class
 from .param_options import model_params
-from .taichi_runtime import COMPILERS, check_arch, select_compiler
+from .taichi_runtime import COMPILERS, check_arch, select_compiler, set_compile_notices
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
@@ -65,6 +65,7 @@ class ArgumentParser(argparse.ArgumentParser):
     (argparse's own ``error`` prints the whole usage block first.) ``--rain`` followed by anything
     but one of its words (``on``, ``off``, ``both`` and the deprecated ones) is the flag: ``--rain
     clip.mp4`` is rain on ``clip.mp4``, not a bad ``--rain`` value (:func:`rain_flag_argv`).
+    ``--no-progress`` also silences the compile notices (:func:`~cdnf_ti.taichi_runtime.set_compile_notices`).
     """
 
     def error(self, message: str) -> None:  # type: ignore[override]
@@ -73,7 +74,10 @@ class ArgumentParser(argparse.ArgumentParser):
     def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
         if args is not None:
             args = rain_flag_argv(list(args))
-        return super().parse_known_args(args, namespace)
+        ns, rest = super().parse_known_args(args, namespace)
+        if getattr(ns, "no_progress", False):
+            set_compile_notices(False)  # --no-progress: no "compiling kernels" lines either (workers inherit it)
+        return ns, rest
 
 
 def note(text: str) -> None:
@@ -191,17 +195,30 @@ def rain_word(text: str) -> str:
 
 
 def rain_flag_argv(argv: list[str]) -> list[str]:
-    """``--rain`` not followed by a rain word becomes ``--rain=on`` (so the next word stays an input)."""
+    """``--rain`` followed by an input (or an option, or nothing) becomes ``--rain=on``, so the next word
+    stays an input.
+
+    The next word is taken as ``--rain``'s value, so that a wrong one (``--rain maybe``) is reported with
+    the valid words, unless it looks like an input: an existing path, a ``stim:`` spec, or a name with a
+    dot or a path separator (``clip.mp4``, ``videos/``).
+    """
     words = set(RAIN_WORDS) | set(OLD_RAIN_WORDS)
     out = []
     for i, a in enumerate(argv):
         if a == "--":
             return out + argv[i:]
-        if a == "--rain" and (i + 1 >= len(argv) or argv[i + 1].strip().lower() not in words):
+        if a == "--rain" and (i + 1 >= len(argv) or (argv[i + 1].strip().lower() not in words
+                                                      and _looks_like_input(argv[i + 1]))):
             out.append("--rain=on")
         else:
             out.append(a)
     return out
+
+
+def _looks_like_input(word: str) -> bool:
+    """Whether a word after ``--rain`` is an input or an option rather than a (wrong) rain word."""
+    return (word.startswith("-") or word.startswith("stim:") or any(c in word for c in "./\\")
+            or Path(word).exists())
 
 
 def add_rain_options(ap: argparse.ArgumentParser, default: str = "off", flag: bool = True,

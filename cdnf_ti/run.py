@@ -185,6 +185,8 @@ def _run_videos(args, models: list[str], params: dict, out: Path, write_text) ->
                                   rain_params if condition == "rain" else None, rain_seed)
             summary += rows
             ran += n_ok
+    if not ran:  # every input failed: the output folder is left as it was (a folder made for the run is removed)
+        return EXIT_USAGE
     merge_summary(out / "summary.csv", sorted(summary, key=lambda r: r["_i"]), write_text)
     print(f"results in {out}/ (summary.csv lists every run made into this folder)", file=sys.stderr)
     n_failed = sum(1 for r in summary if str(r.get("status", "")).startswith("error"))

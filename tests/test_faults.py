@@ -868,3 +868,33 @@ def test_second_signal_during_the_clean_stop_of_live_record_leaves_a_playable_re
     cap.release()
     assert frames > 0
     assert not [p for p in tmp_path.iterdir() if p.name != "rec.avi"]  # no hidden temporary file left
+
+
+@pytest.mark.parametrize("existing", [False, True], ids=["new-folder", "existing-folder"])
+def test_a_run_whose_every_input_failed_leaves_the_output_folder_as_it_was(looming_npy, tmp_path, capsys, existing):
+    from cdnf_ti.models import MODELS, register_model
+    from cdnf_ti.models.sdnf import SDNF
+
+    class Broken(SDNF):
+        name = "broken_for_empty_run_test"
+
+        def step(self, frame):
+            raise RuntimeError("model bug")
+
+    out = tmp_path / "o"
+    if existing:
+        out.mkdir()
+        (out / "summary.csv").write_text("input,clip,model\nearlier,earlier,cdnf\n")
+    before = sorted((p.name, p.read_bytes()) for p in out.iterdir()) if existing else None
+    register_model(Broken)
+    try:
+        code = main([str(looming_npy), "--model", "broken_for_empty_run_test", "--backend", "numpy", "--out",
+                     str(out), "--no-progress"])
+    finally:
+        MODELS.pop("broken_for_empty_run_test", None)
+    assert code == 2
+    assert "error:" in capsys.readouterr().err
+    if existing:
+        assert sorted((p.name, p.read_bytes()) for p in out.iterdir()) == before
+    else:
+        assert not out.exists()

@@ -46,6 +46,12 @@ class Engine:
         return taichi_runtime.compile_count()
 
     @staticmethod
+    def compiling(label: str) -> Any:
+        """A context of steps that may compile kernels for ``label``: a one-line notice on a cold cache
+        (:class:`~cdnf_ti.taichi_runtime.compiling`)."""
+        return taichi_runtime.compiling(label)
+
+    @staticmethod
     def backend(model: Any, shape: tuple[int, int]) -> Any:
         """The compiled backend of ``model`` for frames of ``shape`` (H, W)."""
         # the model's own name, else the nearest base class's (a subclass that changes no equations)

@@ -36,7 +36,7 @@ from .clip_tasks import (
     run_clip_task as run_clip_task,
     run_clips,
 )
-from .labels import ClipLabel, drop_missing, labels_in_frames, read_labels, unlabelled_videos, validate_dataset
+from .labels import ClipLabel, labels_in_frames, load_labels, unlabelled_videos
 from .layout import (
     CONDITIONS as CONDITIONS,
     RAIN_CHOICES as RAIN_CHOICES,
@@ -156,14 +156,11 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
     annotations = None
     if fmt == "labels":
         labels_path = Path(labels_path) if labels_path is not None else folder / "labels.csv"
-        labels = read_labels(labels_path)
-        if skip_missing:
-            labels, _ = drop_missing(labels, folder)
-        files = validate_dataset(labels, folder, labels_path)
+        labels, files = load_labels(labels_path, folder, fps, (events or {}).get("bin_ms"), skip_missing)
     else:
         annotations, labels, files, fps = benchmark_labels(fmt, folder, labels_path, split, skip_missing, fps)
         labels_path = Path(labels_path) if labels_path is not None else folder
-    labels = labels_in_frames(labels, files, fps, (events or {}).get("bin_ms"), labels_path)
+        labels = labels_in_frames(labels, files, fps, (events or {}).get("bin_ms"), labels_path)
     conditions = frames_only_conditions(files, RAIN_CHOICES[rain], folder)
     note_inferred_sensor_size(files, (events or {}).get("sensor_size"))
     models = list(dict.fromkeys(models))

@@ -101,6 +101,7 @@ HINTS = {
     "ambiguous": "write the file name with its extension in the clip column",
     "seconds": "times are seconds from the clip's start, numbers >= 0",
     "both": "give the window and contact in frames or in seconds, not both",
+    "quote": "close the quote, or remove it: a field needs quotes only when it holds a comma",
 }
 
 
@@ -146,6 +147,8 @@ def _reject(path: str, problems: list[str]) -> InputError:
 def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
     """Read and check a labels CSV (without looking at the videos).
 
+    :func:`load_labels` also checks the videos, and reports every problem of both in one message.
+
     Parameters
     ----------
     path : path-like
@@ -162,6 +165,22 @@ def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
         Missing file, missing columns, an unknown label value, a bad or missing
         window, ``window_start > window_end``, a duplicate clip, or an empty file;
         the message names the row.
+    """
+    labels, problems = _parse_labels(path)
+    if problems:
+        raise _reject(str(path), problems)
+    if not labels:
+        raise InputError(str(path), "labels file has a header but no rows")
+    return labels
+
+
+def _parse_labels(path: str | os.PathLike) -> tuple[list[ClipLabel], list[str]]:
+    """The good rows of a labels CSV and the problems of the bad ones (:func:`read_labels`).
+
+    Raises
+    ------
+    InputError
+        The file cannot be read at all: missing, a folder, empty, not UTF-8, or its header lacks columns.
     """
     path = str(path)
     p = Path(path)
@@ -189,6 +208,11 @@ def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
     seen: dict[str, int] = {}
     problems: list[str] = []
     for line, r in enumerate(rows[1:], start=2):
+        if any("\n" in c or "\r" in c for c in r):  # the rest of the file was read into one quoted field
+            problems.append(str(_bad(line, "", "a quote (\") opened in this row is never closed, so the rest of "
+                                               "the file is read as one field", "quote")))
+            break
+
         def get(name: str) -> str:
             i = col.get(name)
             return r[i] if i is not None and i < len(r) else ""  # noqa: B023 - called in this iteration only
@@ -204,11 +228,11 @@ def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
                 raise _bad(line, "", f"clip {clip!r} is already labelled in row {seen[clip]}", "duplicate")
             seen[clip] = line
             lab = get("label").strip()
-            key = lab.lower()
-            if key not in LABEL_VALUES:
-                raise _bad(line, clip, f"label {lab!r} is not collision, non-collision or near-miss", "label")
-            collision = LABEL_VALUES[key]
-            errs = []
+            errs = []  # every problem of the row, not only its first
+            collision = LABEL_VALUES.get(lab.lower())
+            if collision is None:
+                errs.append(str(_bad(line, clip, f"label {lab!r} is not collision, non-collision or near-miss",
+                                     "label")))
             vals = {}
             for name in ("window_start", "window_end", "contact_frame"):
                 try:
@@ -244,11 +268,7 @@ def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
             continue
         labels.append(ClipLabel(clip, lab, collision, ws, we, cf, line,
                                 window_s=(ss, se) if ss is not None and se is not None else None, contact_s=cs))
-    if problems:
-        raise _reject(path, problems)
-    if not labels:
-        raise InputError(path, "labels file has a header but no rows")
-    return labels
+    return labels, problems
 
 
 def drop_missing(labels: list[ClipLabel], folder: str | os.PathLike) -> tuple[list[ClipLabel], list[str]]:
@@ -325,7 +345,14 @@ def validate_dataset(labels: Iterable[ClipLabel], folder: str | os.PathLike,
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError(folder, "dataset folder not found")
-    lp = str(labels_path)
+    files, problems = _check_files(labels, folder)
+    if problems:
+        raise _reject(str(labels_path), problems)
+    return files
+
+
+def _check_files(labels: Iterable[ClipLabel], folder: Path) -> tuple[dict[str, Path], list[str]]:
+    """Clip -> its file for the labels whose video is found, and the problems (:func:`validate_dataset`)."""
     files: dict[str, Path] = {}
     problems: list[str] = []
     for lab in labels:
@@ -341,9 +368,7 @@ def validate_dataset(labels: Iterable[ClipLabel], folder: str | os.PathLike,
         files[lab.clip] = f
         if lab.window_start is not None or lab.contact_frame is not None:
             problems += _outside(lab, frame_count(f))
-    if problems:
-        raise _reject(lp, problems)
-    return files
+    return files, problems
 
 
 def _outside(lab: ClipLabel, n: int | None) -> list[str]:
@@ -396,6 +421,15 @@ def labels_in_frames(labels: Iterable[ClipLabel], files: dict[str, Path], fps: f
     InputError
         A window or contact time past a video's end.
     """
+    out, problems = _in_frames(labels, files, fps, bin_ms)
+    if problems:
+        raise _reject(str(labels_path), problems)
+    return out
+
+
+def _in_frames(labels: Iterable[ClipLabel], files: dict[str, Path], fps: float | None,
+               bin_ms: float | None) -> tuple[list[ClipLabel], list[str]]:
+    """The labels in frames and the problems (:func:`labels_in_frames`)."""
     out, problems = [], []
     for lab in labels:
         f = files.get(lab.clip)
@@ -418,9 +452,47 @@ def labels_in_frames(labels: Iterable[ClipLabel], files: dict[str, Path], fps: f
         lab = dataclasses.replace(lab, window_start=ws, window_end=we, contact_frame=cf)
         problems += _outside(lab, n)
         out.append(lab)
+    return out, problems
+
+
+def load_labels(labels_path: str | os.PathLike, folder: str | os.PathLike, fps: float | None = None,
+                bin_ms: float | None = None, skip_missing: bool = False) -> tuple[list[ClipLabel], dict[str, Path]]:
+    """Read a labels file and check it against the dataset folder, reporting every bad row in one pass.
+
+    :func:`read_labels`, then (``skip_missing``) :func:`drop_missing`, :func:`validate_dataset` and
+    :func:`labels_in_frames`, except that the problems of all three (a bad value, a clip with no video,
+    a window past a video's end) are collected and raised together, in row order.
+
+    Returns
+    -------
+    (list of ClipLabel, dict of str to Path)
+        The labels with every window in frames, and clip -> its file.
+
+    Raises
+    ------
+    InputError
+        The folder or the file cannot be read, or any row is bad (one message naming every bad row).
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(folder, "dataset folder not found")
+    labels, problems = _parse_labels(labels_path)
+    if skip_missing:
+        labels, _ = drop_missing(labels, folder)
+    files, missing = _check_files(labels, folder)
+    labels, outside = _in_frames(labels, files, fps, bin_ms)
+    problems = sorted(problems + missing + outside, key=_row_of)
     if problems:
         raise _reject(str(labels_path), problems)
-    return out
+    if not labels:
+        raise InputError(str(labels_path), "labels file has a header but no rows")
+    return labels, files
+
+
+def _row_of(problem: str) -> int:
+    """The row number a problem message starts with (``"row 5 (c06): ..."``)."""
+    head = problem.split(" ", 2)
+    return int(head[1].rstrip(":")) if len(head) > 1 and head[0] == "row" and head[1].rstrip(":").isdigit() else 0
 
 
 def is_clip_file(path: Path) -> bool:

@@ -54,7 +54,7 @@ from .clip_tasks import (
     task_fingerprint as task_fingerprint,
 )
 from .clipscores import choose_level, correctness_matrix, cross_validated_accuracy, roc
-from .labels import drop_missing, labels_in_frames, read_labels, validate_dataset
+from .labels import load_labels
 from .layout import RAIN_CHOICES, trace_path
 from .nested import sweep_nested_cv
 from .parallel import cleaned_up
@@ -226,11 +226,7 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
     if not folder.is_dir():
         raise InputError(folder, "dataset folder not found")
     labels_path = Path(labels_path) if labels_path is not None else folder / "labels.csv"
-    labels = read_labels(labels_path)
-    if skip_missing:
-        labels, _ = drop_missing(labels, folder)
-    files = validate_dataset(labels, folder, labels_path)
-    labels = labels_in_frames(labels, files, fps, (events or {}).get("bin_ms"), labels_path)
+    labels, files = load_labels(labels_path, folder, fps, (events or {}).get("bin_ms"), skip_missing)
     conditions = frames_only_conditions(files, RAIN_CHOICES[rain], folder)
     note_inferred_sensor_size(files, (events or {}).get("sensor_size"))
     out = Path(out)

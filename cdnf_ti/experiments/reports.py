@@ -264,11 +264,13 @@ def summary_markdown(run: "DatasetRun", summary: Mapping, specs: Mapping) -> str
               "`threshold_sweep.csv` has every count; `figures/threshold_sweep.png` plots them.", ""]
         for m in run.models:
             spec = specs[m]
-            how = {"model": f"the model's own `sweep_alerts` over `{spec.parameter}`",
-                   "cdnf-epsilon": "alert = I_v > 0.5 + epsilon on the saved I_v",
-                   "fallback": f"fallback: alert = {spec.parameter.split()[0]} > value on the saved output "
-                               "(the model defines no `sweep_alerts`)"}[spec.method]
-            L.append(f"### {m}: {spec.parameter} ({how})")
+            how = {"model": "The model's own alert rule, replayed on the saved traces at each value.",
+                   "cdnf-epsilon": "Alert when I_v > 0.5 + epsilon, on the saved I_v.",
+                   "fallback": f"Alert when {spec.parameter.split()[0]} > value, on the saved output (the model "
+                               "states no rule to replay)."}[spec.method]
+            L.append(f"### {m}: {spec.parameter}")
+            L.append("")
+            L.append(how)
             L.append("")
             L.append(f"| {spec.parameter} | " + " | ".join(f"{c} accuracy | {c} hits | {c} false alarms"
                                                          for c in run.conditions) + " |")

@@ -338,8 +338,13 @@ class Model:
 
         The frame is converted to grey, checked against the model's frame size
         (fixed by the first frame), loaded into the backend, and handed to the
-        model's equations (:meth:`_step`).
+        model's equations (:meth:`_step`). Kernels compiled meanwhile are announced (:meth:`_compiling`).
         """
+        with self._compiling(np.shape(frame)):
+            return self._step_frame(frame)
+
+    def _step_frame(self, frame: np.ndarray) -> StepResult:
+        """:meth:`step` without the compile notice."""
         grey = self._prepare(frame)
         with self._backend_lock():
             t = self._t
@@ -368,6 +373,11 @@ class Model:
             raise ValueError(f"p_on and p_off must be (H, W) arrays of one shape, got {p_on.shape} and {p_off.shape}")
         if not self.takes_events:
             raise UserError(f"model {self.name} does not take event input yet")
+        with self._compiling(p_on.shape):
+            return self._step_bin(p_on, p_off)
+
+    def _step_bin(self, p_on: np.ndarray, p_off: np.ndarray) -> StepResult:
+        """:meth:`step_on_off` after its checks, without the compile notice."""
         if self._be is None:
             self._make_backend(p_on.shape, np.dtype(np.float32))
         elif p_on.shape != self._be.shape:
@@ -396,6 +406,14 @@ class Model:
             return {}
         with self._backend_lock():
             return {k: np.asarray(v) for k, v in self._be.fields().items()}
+
+    def _compiling(self, shape: Sequence[int]) -> Any:
+        """The context of a step at frames of ``shape`` (H, W, ...): the engine announces kernels compiled in it
+        ("compiling kernels for cdnf at 432x240, first time only; ..."); a no-op for the ``numpy`` backend."""
+        scope = getattr(self.engine, "compiling", None) if self.backend_name == "taichi" else None
+        if scope is None or len(shape) < 2:
+            return contextlib.nullcontext()
+        return scope(f"{self.name} at {shape[1]}x{shape[0]}")
 
     def _backend_lock(self) -> Any:
         """The lock of a backend whose buffers are shared with other models (else a no-op context)."""
