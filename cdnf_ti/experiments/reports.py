@@ -216,7 +216,7 @@ def summary_markdown(run: "DatasetRun", summary: Mapping, specs: Mapping) -> str
             lt = d["mean_lead_time_ms"]
             L.append(f"| {m} | {c} | {d['TP']} | {d['TN']} | {d['FP']} | {d['FN']} "
                      f"({d['FN_early']}/{d['FN_late']}/{d['FN_none']}) | {d['errors']} | {pct(d['accuracy'])} | "
-                     f"{'' if lt is None else f'{lt:.0f} ms'} |")
+                     f"{'' if lt is None else f'{lt / 1000:.2f} s'} |")
     L += scores_markdown(run, summary)
     L += lead_time_markdown(run, summary)
     L += ["", "## First alert per clip (frame, outcome; lead time before contact)", ""]
@@ -240,7 +240,7 @@ def summary_markdown(run: "DatasetRun", summary: Mapping, specs: Mapping) -> str
             txt = "none" if fa in (None, "") else str(fa)
             txt += f" {r['outcome']}" + (f" ({r['fn_reason']})" if r["fn_reason"] else "")
             if r.get("lead_time_ms") not in (None, ""):
-                txt += f", {float(r['lead_time_ms']):.0f} ms"
+                txt += f", {float(r['lead_time_ms']) / 1000:+.2f} s"
             cells.append(txt)
         L.append(f"| {lab.clip} | {lab.label} | {win} | {'' if lab.contact_frame is None else lab.contact_frame} | "
                  + " | ".join(cells) + " |")
@@ -293,8 +293,8 @@ def scores_table(run: "DatasetRun", summary: Mapping) -> tuple[list[str], list[l
             lt = d["lead_times"]
             lead = f"{lt['hits_before_contact']}"
             if lt["hit_lead_median_ms"] is not None:
-                lead += (f", {lt['hit_lead_median_ms']:.0f} ms ({lt['hit_lead_min_ms']:.0f}-"
-                         f"{lt['hit_lead_max_ms']:.0f})")
+                lead += (f", {lt['hit_lead_median_ms'] / 1000:.2f} s ({lt['hit_lead_min_ms'] / 1000:.2f}-"
+                         f"{lt['hit_lead_max_ms'] / 1000:.2f})")
             held = d.get("held")
             best = d["in_sample_best"]
             rows.append([m, c, pct_ci(d["accuracy_ci"]), "n/a" if d["auc"] is None else f"{d['auc']:.3f}",
@@ -327,7 +327,7 @@ def scores_markdown(run: "DatasetRun", summary: Mapping) -> list[str]:
          f"- CV accuracy: {any_cv} cross-validation; each clip is scored at the alert level chosen on the other "
          "clips only (out-of-sample).",
          f"- Best level: {IN_SAMPLE_NOTE}.",
-         "- Lead time: ms before the contact frame of first alerts inside the window; hits at or after contact "
+         "- Lead time: seconds before the contact frame of first alerts inside the window; hits at or after contact "
          "warn of nothing and are counted separately.",
          f"- never alerts (baseline): a model that never alerts scores the share of non-collision clips, "
          f"{pct(summary.get('never_alerts_accuracy'))} here.",
