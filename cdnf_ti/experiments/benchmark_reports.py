@@ -90,6 +90,16 @@ def _ci(d: Mapping) -> str:
     return f"{d['value']:.3f}" + ("" if lo is None else f" [{lo:.3f}, {hi:.3f}]")
 
 
+def res_share(bench: Mapping) -> str:
+    """The share of positive videos among those Nexar scores at 0.5 s (the AP of a random ranking), as text."""
+    for per in (bench.get("results") or {}).values():
+        for d in per.values():
+            n, pos = d["nexar"]["videos"].get("0.5"), d["nexar"]["positives"].get("0.5")
+            if n:
+                return f"{pos}/{n} = {pos / n:.3f} here"
+    return ""
+
+
 def benchmark_markdown(bench: Mapping) -> list[str]:
     """The benchmark section of summary.md: protocol, metric table, lead-time table, per-condition table."""
     res = bench.get("results") or {}
@@ -102,7 +112,8 @@ def benchmark_markdown(bench: Mapping) -> list[str]:
          "each model's per-frame output (its I_v, K, ...); no alert level is chosen.",
          f"- Nexar AP at {hz} s: one score per video, the highest per-frame score over the frames seen by "
          "t_event - horizon (frame k is seen at k / fps); negative clips score over all frames; AP over videos. "
-         "Positive clips with no frame by then are left out.",
+         "Positive clips with no frame by then are left out. A score that ranks at random has an AP equal to "
+         "the share of positive videos" + (f" ({res_share(bench)})" if res_share(bench) else "") + ".",
          "- Frame AP / AUC: every frame of every clip pooled, labelled by the per-frame labels (labels.csv: "
          "the window's frames).",
          "- Video AP / mTTA: a video is alerted at a threshold when a frame before its event scores at or above "
@@ -155,7 +166,7 @@ def plot_lead_seconds(path: str | os.PathLike, bench: Mapping) -> Path | None:
     if not rows:
         return None
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(8.4, 1.0 + 0.55 * len(rows)))
+    fig, ax = plt.subplots(figsize=(10.5, 1.0 + 0.55 * len(rows)))
     for k, (_m, _c, lt) in enumerate(rows):
         y = len(rows) - 1 - k
         v = np.asarray(sorted(lt["leads_s"].values()))
@@ -180,9 +191,10 @@ def plot_lead_seconds(path: str | os.PathLike, bench: Mapping) -> Path | None:
 
 
 def write_benchmark(run: "DatasetRun", traces: Mapping, fmt: str, annotations: Mapping[str, Annotation] | None,
-                    seed: int, figures: bool) -> tuple[dict, list[str], list[Path]]:
-    """Score the benchmark: its summary (for summary.json), its summary.md lines and its figures."""
+                    seed: int, figures: bool) -> tuple[dict, list[Path]]:
+    """Score the benchmark: its summary (``summary.json``'s ``benchmark``; :func:`benchmark_markdown` writes
+    it into summary.md) and its figures."""
     bench = benchmark_summary(run, traces, fmt, annotations, seed)
     pngs: Sequence[Path | None] = [plot_lead_seconds(Path(run.out) / "figures" / "lead_time_seconds.png", bench)
                                    ] if figures else []
-    return bench, benchmark_markdown(bench), [p for p in pngs if p is not None]
+    return bench, [p for p in pngs if p is not None]

@@ -10,7 +10,7 @@ import numpy as np
 from ..atomic import atomic_write_json, atomic_write_text
 from ..models.base import Trace
 from ..paper import TABLE2
-from .benchmark_reports import write_benchmark
+from .benchmark_reports import benchmark_markdown, write_benchmark
 from .clipscores import (
     IN_SAMPLE_NOTE,
     bootstrap_accuracy,
@@ -219,6 +219,7 @@ def summary_markdown(run: "DatasetRun", summary: Mapping, specs: Mapping) -> str
                      f"{'' if lt is None else f'{lt / 1000:.2f} s'} |")
     L += scores_markdown(run, summary)
     L += lead_time_markdown(run, summary)
+    L += benchmark_markdown(summary.get("benchmark") or {})
     L += ["", "## First alert per clip (frame, outcome; lead time before contact)", ""]
     cols = [(m, c) for m in run.models for c in run.conditions]
     L.append("| Clip | Label | Window (padded) | Contact | " + " | ".join(f"{m} {c}" for m, c in cols) + " |")
@@ -385,11 +386,9 @@ def write_reports(run: "DatasetRun", dataset: str, labels_path: str, seed: int, 
     atomic_write_text(out / "threshold_sweep.csv", csv_text(run.sweep, SWEEP_COLUMNS))
     scores = honest_scores(run, traces, specs, seed=seed)
     run.summary = summary_dict(run, specs, dataset, labels_path, seed, scores)
-    bench, bench_md, bench_pngs = write_benchmark(run, traces, fmt, annotations, seed, figures)
-    run.summary["benchmark"] = bench
+    run.summary["benchmark"], bench_pngs = write_benchmark(run, traces, fmt, annotations, seed, figures)
     atomic_write_json(out / "summary.json", run.summary)
     markdown = summary_markdown(run, run.summary, specs)
-    markdown = "\n".join([*markdown.rstrip("\n").split("\n"), *bench_md, ""])
     atomic_write_text(out / "summary.md", markdown)
     pngs: list = []
     if figures:
