@@ -181,3 +181,12 @@ def test_every_model_runs_on_the_layout_and_scores_as_sklearn(layouts, fmt, tmp_
             assert got["anticipation"]["ap"] == pytest.approx(ref["video_ap"], abs=1e-12)
         lt = got["lead_times"]
         assert lt["positive_clips"] == sum(ev is not None for ev, _, _ in made.values())
+
+
+def test_report_html_shows_the_benchmark_and_the_lead_time_distribution(layouts, tmp_path):
+    folder, _ = layouts["nexar"]
+    run_dataset(folder, None, tmp_path, models=["cdnf"], workers=0, progress=False, fmt="nexar")
+    assert (tmp_path / "figures" / "lead_time_seconds.png").stat().st_size > 0
+    page = (tmp_path / "report.html").read_text()
+    assert "Benchmark scores (nexar)" in page and "Nexar AP 1.5 s" in page
+    assert "Lead time before the event (s) per model" in page  # the figure's caption

@@ -7,6 +7,7 @@ report.html); :func:`plot_lead_seconds` draws the lead-time distribution per mod
 """
 from __future__ import annotations
 
+import inspect
 import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Mapping, Sequence
@@ -158,6 +159,12 @@ def benchmark_markdown(bench: Mapping) -> list[str]:
     return L
 
 
+def _horizontal(ax) -> dict:
+    """``boxplot``'s keyword for a horizontal box (``orientation`` from Matplotlib 3.10, ``vert`` before)."""
+    return ({"orientation": "horizontal"} if "orientation" in inspect.signature(ax.boxplot).parameters
+            else {"vert": False})
+
+
 def plot_lead_seconds(path: str | os.PathLike, bench: Mapping) -> Path | None:
     """Each model's lead times before the event (s): one dot per positive clip that alerted, a box of their
     spread, dotted lines at 0.5, 1 and 1.5 s, and the shares warned that far ahead in the margin."""
@@ -171,7 +178,7 @@ def plot_lead_seconds(path: str | os.PathLike, bench: Mapping) -> Path | None:
         y = len(rows) - 1 - k
         v = np.asarray(sorted(lt["leads_s"].values()))
         if v.size:
-            ax.boxplot([v], positions=[y], vert=False, widths=0.5, showfliers=False, manage_ticks=False)
+            ax.boxplot([v], positions=[y], widths=0.5, showfliers=False, manage_ticks=False, **_horizontal(ax))
             jitter = np.linspace(-0.15, 0.15, v.size) if v.size > 1 else np.zeros(1)
             ax.plot(v, y + jitter, "o", ms=5, color="tab:blue", alpha=0.75)
         sh = lt["shares"]
