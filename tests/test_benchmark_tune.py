@@ -85,3 +85,15 @@ def test_tune_command_needs_one_model_and_a_search_space(tuned, tmp_path, capsys
     assert main(["experiment", "tune", str(folder), "--out", str(tmp_path / "b")]) == 2
     err = capsys.readouterr().err
     assert "exactly one --model" in err and "at least one --param" in err
+
+
+def test_a_dask_cluster_chooses_and_scores_as_the_local_run(tuned, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    folder, _, res = tuned
+    with distributed.LocalCluster(n_workers=1, processes=True, threads_per_worker=1, dashboard_address=None,
+                                  silence_logs=40) as cluster:
+        dask = run_tune(folder, None, tmp_path, "cdnf", ["h=0.05:0.3", "alpha_on=0.3,0.5"], trials=3, folds=2,
+                        seed=0, scheduler=cluster.scheduler_address, progress=False)
+    assert dask["ran"] > 0 and not dask["errors"]
+    assert [d["key"] for d in dask["folds"]] == [d["key"] for d in res["folds"]]
+    assert dask["per_clip"] == res["per_clip"] and dask["accuracy"] == res["accuracy"]
