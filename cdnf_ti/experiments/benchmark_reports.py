@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Mapping, Sequence
 
 import numpy as np
 
+from ..atomic import atomic_write_text
 from .annotations import Annotation, from_clip_label
 from .benchmark_scores import (
     HEADLINE,
@@ -24,11 +25,14 @@ from .benchmark_scores import (
     bootstrap_metric,
     by_condition,
     frame_level,
+    horizon_scores,
     lead_times_s,
     nexar_ap,
+    scores_before_event,
 )
 from .figures import _plt, save_figure
 from .htmlreport import markdown_table
+from .tables import csv_text
 
 if TYPE_CHECKING:  # pragma: no cover
     from .clip_tasks import DatasetRun
@@ -197,11 +201,44 @@ def plot_lead_seconds(path: str | os.PathLike, bench: Mapping) -> Path | None:
     return save_figure(fig, path)
 
 
+#: Columns of ``benchmark_clips.csv``: each clip's per-frame-score summary beside its first alert.
+CLIP_COLUMNS = ("clip", "model", "condition", "event_s", "alert_s", "fps", "frames", "first_alert",
+                "first_alert_s", "lead_s", "max_score", *[f"score_{h:g}s_before" for h in NEXAR_HORIZONS],
+                "max_score_before_event")
+
+
+def clip_rows(run: "DatasetRun", traces: Mapping, annotations: Mapping[str, Annotation] | None) -> list[dict]:
+    """One ``benchmark_clips.csv`` row per clip, model and condition: the event and alert times (s), the
+    first alert (frame, s) and its lead before the event (s), and the per-frame score's summaries the
+    benchmark scores use (its maximum, its maximum over the frames seen by each Nexar horizon, and before
+    the event); empty where undefined."""
+    rows = []
+    for m in run.models:
+        for c in run.conditions:
+            for co in clip_outputs(run, traces, m, c, annotations):
+                a = co.annotation
+                row = {"clip": a.clip, "model": m, "condition": c, "event_s": a.event_s, "alert_s": a.alert_s,
+                       "fps": co.fps, "frames": int(co.scores.size), "first_alert": co.first_alert,
+                       "first_alert_s": None if co.first_alert is None else round(co.first_alert / co.fps, 4),
+                       "lead_s": None if co.first_alert is None or a.event_s is None
+                       else round(a.event_s - co.first_alert / co.fps, 4),
+                       "max_score": float(np.nanmax(co.scores)) if co.scores.size else None}
+                for h in NEXAR_HORIZONS:
+                    y, s, _ = horizon_scores([co], h)
+                    row[f"score_{h:g}s_before"] = float(s[0]) if s.size and a.event_s is not None else None
+                before = scores_before_event(co)
+                row["max_score_before_event"] = float(before.max()) if a.event_s is not None and before.size else None
+                rows.append(row)
+    return rows
+
+
 def write_benchmark(run: "DatasetRun", traces: Mapping, fmt: str, annotations: Mapping[str, Annotation] | None,
                     seed: int, figures: bool) -> tuple[dict, list[Path]]:
-    """Score the benchmark: its summary (``summary.json``'s ``benchmark``; :func:`benchmark_markdown` writes
-    it into summary.md) and its figures."""
+    """Score the benchmark: write ``benchmark_clips.csv`` (:func:`clip_rows`) and return its summary
+    (``summary.json``'s ``benchmark``; :func:`benchmark_markdown` writes it into summary.md) and its figures."""
     bench = benchmark_summary(run, traces, fmt, annotations, seed)
+    atomic_write_text(Path(run.out) / "benchmark_clips.csv", csv_text(clip_rows(run, traces, annotations),
+                                                                      CLIP_COLUMNS))
     pngs: Sequence[Path | None] = [plot_lead_seconds(Path(run.out) / "figures" / "lead_time_seconds.png", bench)
                                    ] if figures else []
     return bench, [p for p in pngs if p is not None]

@@ -169,7 +169,7 @@ def frame_level(clips: Sequence[ClipOutput]) -> dict:
             "positive_frames": int(y.sum())}
 
 
-def _before_event(c: ClipOutput) -> np.ndarray:
+def scores_before_event(c: ClipOutput) -> np.ndarray:
     """The scores a clip offers for anticipation: a positive clip's frames that end by its event (those
     before the frame holding it, :func:`~.labels.frame_at`), a negative clip's all frames."""
     s = _finite(c.scores)
@@ -198,7 +198,7 @@ def anticipation(clips: Sequence[ClipOutput]) -> dict:
     """
     kept, left = [], []
     for c in clips:
-        s = _before_event(c)
+        s = scores_before_event(c)
         if s.size == 0:
             if c.annotation.event_s is not None:
                 left.append(c.annotation.clip)
