@@ -181,3 +181,33 @@ def test_every_model_runs_on_the_layout_and_scores_as_sklearn(layouts, fmt, tmp_
             assert got["anticipation"]["ap"] == pytest.approx(ref["video_ap"], abs=1e-12)
         lt = got["lead_times"]
         assert lt["positive_clips"] == sum(ev is not None for ev, _, _ in made.values())
+
+
+def test_report_html_shows_the_benchmark_and_the_lead_time_distribution(layouts, tmp_path):
+    folder, _ = layouts["nexar"]
+    run_dataset(folder, None, tmp_path, models=["cdnf"], workers=0, progress=False, fmt="nexar")
+    assert (tmp_path / "figures" / "lead_time_seconds.png").stat().st_size > 0
+    page = (tmp_path / "report.html").read_text()
+    assert "Benchmark scores (nexar)" in page and "Nexar AP 1.5 s" in page
+    assert "Lead time before the event (s) per model" in page  # the figure's caption
+
+
+def test_benchmark_clips_csv_keeps_each_clips_scores_beside_its_first_alert(layouts, tmp_path):
+    import csv
+
+    folder, made = layouts["nexar"]
+    run_dataset(folder, None, tmp_path, models=["cdnf"], workers=0, progress=False, figures=False, fmt="nexar")
+    with open(tmp_path / "benchmark_clips.csv", newline="") as f:
+        rows = {r["clip"]: r for r in csv.DictReader(f)}
+    assert set(rows) == set(made)
+    for clip, (event, fps, _) in made.items():
+        tr = Trace.from_csv(trace_path(tmp_path, "clean", clip, "cdnf"))
+        r = rows[clip]
+        assert r["first_alert"] == ("" if tr.first_alert is None else str(tr.first_alert))
+        if event is None:
+            assert r["score_1s_before"] == "" and r["lead_s"] == ""
+            continue
+        seen = [tr.output[k] for k in range(tr.n_frames) if k / fps <= event / fps - 1.0 + 1e-9]
+        assert float(r["score_1s_before"]) == pytest.approx(max(seen), rel=1e-5)  # CSV cells: 6 digits
+        if tr.first_alert is not None:
+            assert float(r["lead_s"]) == pytest.approx(event / fps - tr.first_alert / fps, abs=1e-4)

@@ -7,12 +7,14 @@ report.html); :func:`plot_lead_seconds` draws the lead-time distribution per mod
 """
 from __future__ import annotations
 
+import inspect
 import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Mapping, Sequence
 
 import numpy as np
 
+from ..atomic import atomic_write_text
 from .annotations import Annotation, from_clip_label
 from .benchmark_scores import (
     HEADLINE,
@@ -23,11 +25,14 @@ from .benchmark_scores import (
     bootstrap_metric,
     by_condition,
     frame_level,
+    horizon_scores,
     lead_times_s,
     nexar_ap,
+    scores_before_event,
 )
 from .figures import _plt, save_figure
 from .htmlreport import markdown_table
+from .tables import csv_text
 
 if TYPE_CHECKING:  # pragma: no cover
     from .clip_tasks import DatasetRun
@@ -90,6 +95,16 @@ def _ci(d: Mapping) -> str:
     return f"{d['value']:.3f}" + ("" if lo is None else f" [{lo:.3f}, {hi:.3f}]")
 
 
+def res_share(bench: Mapping) -> str:
+    """The share of positive videos among those Nexar scores at 0.5 s (the AP of a random ranking), as text."""
+    for per in (bench.get("results") or {}).values():
+        for d in per.values():
+            n, pos = d["nexar"]["videos"].get("0.5"), d["nexar"]["positives"].get("0.5")
+            if n:
+                return f"{pos}/{n} = {pos / n:.3f} here"
+    return ""
+
+
 def benchmark_markdown(bench: Mapping) -> list[str]:
     """The benchmark section of summary.md: protocol, metric table, lead-time table, per-condition table."""
     res = bench.get("results") or {}
@@ -102,7 +117,8 @@ def benchmark_markdown(bench: Mapping) -> list[str]:
          "each model's per-frame output (its I_v, K, ...); no alert level is chosen.",
          f"- Nexar AP at {hz} s: one score per video, the highest per-frame score over the frames seen by "
          "t_event - horizon (frame k is seen at k / fps); negative clips score over all frames; AP over videos. "
-         "Positive clips with no frame by then are left out.",
+         "Positive clips with no frame by then are left out. A score that ranks at random has an AP equal to "
+         "the share of positive videos" + (f" ({res_share(bench)})" if res_share(bench) else "") + ".",
          "- Frame AP / AUC: every frame of every clip pooled, labelled by the per-frame labels (labels.csv: "
          "the window's frames).",
          "- Video AP / mTTA: a video is alerted at a threshold when a frame before its event scores at or above "
@@ -147,6 +163,12 @@ def benchmark_markdown(bench: Mapping) -> list[str]:
     return L
 
 
+def _horizontal(ax) -> dict:
+    """``boxplot``'s keyword for a horizontal box (``orientation`` from Matplotlib 3.10, ``vert`` before)."""
+    return ({"orientation": "horizontal"} if "orientation" in inspect.signature(ax.boxplot).parameters
+            else {"vert": False})
+
+
 def plot_lead_seconds(path: str | os.PathLike, bench: Mapping) -> Path | None:
     """Each model's lead times before the event (s): one dot per positive clip that alerted, a box of their
     spread, dotted lines at 0.5, 1 and 1.5 s, and the shares warned that far ahead in the margin."""
@@ -155,12 +177,12 @@ def plot_lead_seconds(path: str | os.PathLike, bench: Mapping) -> Path | None:
     if not rows:
         return None
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(8.4, 1.0 + 0.55 * len(rows)))
+    fig, ax = plt.subplots(figsize=(10.5, 1.0 + 0.55 * len(rows)))
     for k, (_m, _c, lt) in enumerate(rows):
         y = len(rows) - 1 - k
         v = np.asarray(sorted(lt["leads_s"].values()))
         if v.size:
-            ax.boxplot([v], positions=[y], vert=False, widths=0.5, showfliers=False, manage_ticks=False)
+            ax.boxplot([v], positions=[y], widths=0.5, showfliers=False, manage_ticks=False, **_horizontal(ax))
             jitter = np.linspace(-0.15, 0.15, v.size) if v.size > 1 else np.zeros(1)
             ax.plot(v, y + jitter, "o", ms=5, color="tab:blue", alpha=0.75)
         sh = lt["shares"]
@@ -179,10 +201,44 @@ def plot_lead_seconds(path: str | os.PathLike, bench: Mapping) -> Path | None:
     return save_figure(fig, path)
 
 
+#: Columns of ``benchmark_clips.csv``: each clip's per-frame-score summary beside its first alert.
+CLIP_COLUMNS = ("clip", "model", "condition", "event_s", "alert_s", "fps", "frames", "first_alert",
+                "first_alert_s", "lead_s", "max_score", *[f"score_{h:g}s_before" for h in NEXAR_HORIZONS],
+                "max_score_before_event")
+
+
+def clip_rows(run: "DatasetRun", traces: Mapping, annotations: Mapping[str, Annotation] | None) -> list[dict]:
+    """One ``benchmark_clips.csv`` row per clip, model and condition: the event and alert times (s), the
+    first alert (frame, s) and its lead before the event (s), and the per-frame score's summaries the
+    benchmark scores use (its maximum, its maximum over the frames seen by each Nexar horizon, and before
+    the event); empty where undefined."""
+    rows = []
+    for m in run.models:
+        for c in run.conditions:
+            for co in clip_outputs(run, traces, m, c, annotations):
+                a = co.annotation
+                row = {"clip": a.clip, "model": m, "condition": c, "event_s": a.event_s, "alert_s": a.alert_s,
+                       "fps": co.fps, "frames": int(co.scores.size), "first_alert": co.first_alert,
+                       "first_alert_s": None if co.first_alert is None else round(co.first_alert / co.fps, 4),
+                       "lead_s": None if co.first_alert is None or a.event_s is None
+                       else round(a.event_s - co.first_alert / co.fps, 4),
+                       "max_score": float(np.nanmax(co.scores)) if co.scores.size else None}
+                for h in NEXAR_HORIZONS:
+                    y, s, _ = horizon_scores([co], h)
+                    row[f"score_{h:g}s_before"] = float(s[0]) if s.size and a.event_s is not None else None
+                before = scores_before_event(co)
+                row["max_score_before_event"] = float(before.max()) if a.event_s is not None and before.size else None
+                rows.append(row)
+    return rows
+
+
 def write_benchmark(run: "DatasetRun", traces: Mapping, fmt: str, annotations: Mapping[str, Annotation] | None,
-                    seed: int, figures: bool) -> tuple[dict, list[str], list[Path]]:
-    """Score the benchmark: its summary (for summary.json), its summary.md lines and its figures."""
+                    seed: int, figures: bool) -> tuple[dict, list[Path]]:
+    """Score the benchmark: write ``benchmark_clips.csv`` (:func:`clip_rows`) and return its summary
+    (``summary.json``'s ``benchmark``; :func:`benchmark_markdown` writes it into summary.md) and its figures."""
     bench = benchmark_summary(run, traces, fmt, annotations, seed)
+    atomic_write_text(Path(run.out) / "benchmark_clips.csv", csv_text(clip_rows(run, traces, annotations),
+                                                                      CLIP_COLUMNS))
     pngs: Sequence[Path | None] = [plot_lead_seconds(Path(run.out) / "figures" / "lead_time_seconds.png", bench)
                                    ] if figures else []
-    return bench, benchmark_markdown(bench), [p for p in pngs if p is not None]
+    return bench, [p for p in pngs if p is not None]

@@ -134,9 +134,10 @@ def nexar_ap(clips: Sequence[ClipOutput], horizons: Sequence[float] = NEXAR_HORI
     -------
     dict
         ``{"0.5": AP or None, "1": ..., "1.5": ..., "mean": mean of the defined APs or None,
-        "left_out": {horizon: [clips]}, "videos": {horizon: scored clips}}``.
+        "left_out": {horizon: [clips]}, "videos": {horizon: scored clips}, "positives": {horizon: of them
+        positive}}`` (a random ranking's AP is ``positives / videos``).
     """
-    out: dict = {"left_out": {}, "videos": {}}
+    out: dict = {"left_out": {}, "videos": {}, "positives": {}}
     aps = []
     for h in horizons:
         y, s, left = horizon_scores(clips, h)
@@ -144,6 +145,7 @@ def nexar_ap(clips: Sequence[ClipOutput], horizons: Sequence[float] = NEXAR_HORI
         out[f"{h:g}"] = ap
         out["left_out"][f"{h:g}"] = left
         out["videos"][f"{h:g}"] = int(y.size)
+        out["positives"][f"{h:g}"] = int(y.sum())
         if ap is not None:
             aps.append(ap)
     out["mean"] = float(np.mean(aps)) if aps else None
@@ -167,7 +169,7 @@ def frame_level(clips: Sequence[ClipOutput]) -> dict:
             "positive_frames": int(y.sum())}
 
 
-def _before_event(c: ClipOutput) -> np.ndarray:
+def scores_before_event(c: ClipOutput) -> np.ndarray:
     """The scores a clip offers for anticipation: a positive clip's frames that end by its event (those
     before the frame holding it, :func:`~.labels.frame_at`), a negative clip's all frames."""
     s = _finite(c.scores)
@@ -196,7 +198,7 @@ def anticipation(clips: Sequence[ClipOutput]) -> dict:
     """
     kept, left = [], []
     for c in clips:
-        s = _before_event(c)
+        s = scores_before_event(c)
         if s.size == 0:
             if c.annotation.event_s is not None:
                 left.append(c.annotation.clip)

@@ -241,6 +241,31 @@ def _param_sweep(args) -> int:
     return EXIT_FAILED if run.errors else EXIT_OK
 
 
+def _tune(args) -> int:
+    """``experiment tune``: checks the options, runs :func:`~.tune.run_tune`, prints tune.md."""
+    from .tune import run_tune
+
+    check_model_options(args)
+    models = parse_models(args.models)
+    if len(models) != 1:
+        raise UserError("experiment tune takes exactly one --model (its parameters are searched)")
+    if args.rain != "off":
+        raise UserError("experiment tune scores the clean clips; leave out --rain")
+    folder = Path(args.folder)
+    if not folder.is_dir():
+        raise InputError(folder, "dataset folder not found")
+    with output_lock(prepare_output(args.out)):
+        res = run_tune(folder, args.labels, Path(args.out), models[0], args.param, trials=args.trials,
+                       folds=args.folds, seed=rain_seed_of(args), padding=Padding(args.pad_before, args.pad_after),
+                       workers=args.workers, scheduler=args.scheduler, backend=args.backend, arch=args.arch,
+                       progress=not args.no_progress, downscale=args.downscale, fps=args.fps,
+                       color_order=args.color_order, skip_missing=args.skip_missing, events=event_options_of(args))
+    print((Path(args.out) / "tune.md").read_text(encoding="utf-8"))
+    for e in res["errors"]:
+        print(f"error: {e.get('error')} [{e.get('key')}]", file=sys.stderr)
+    return EXIT_FAILED if res["errors"] else EXIT_OK
+
+
 def dataset_main(argv: Sequence[str]) -> int:
     """``python -m cdnf_ti.run dataset DIR --labels CSV --out OUT [...]``."""
     ap = ArgumentParser(
@@ -302,7 +327,8 @@ def experiment_main(argv: Sequence[str]) -> int:
     """``python -m cdnf_ti.run experiment table1|coherence|selectivity|table2 [...]``."""
     ap = ArgumentParser(prog="python -m cdnf_ti.run experiment",
                         description="Regenerate the paper's experiments.")
-    sub = ap.add_subparsers(dest="which", required=True, metavar="{table1,coherence,selectivity,table2,sweep}")
+    sub = ap.add_subparsers(dest="which", required=True,
+                            metavar="{table1,coherence,selectivity,table2,sweep,tune}")
     on_frames = ("It runs on frames drawn in memory; for the event versions of the stimuli, emulate them "
                  "('python -m cdnf_ti.run events stim:NAME --out DIR') and run the recordings with 'run' or "
                  "'dataset'.")
@@ -362,7 +388,22 @@ def experiment_main(argv: Sequence[str]) -> int:
                     help="resize every frame by this factor in (0, 1] (default 1: native size)")
     p4.add_argument("--no-html", action="store_true", help="do not write report.html")
     _add_dataset_options(p4, rain_default="off", one_model=True)
+    p5 = sub.add_parser("tune", help="ONE model's parameters searched by Optuna (TPE, seeded) inside nested "
+                                     "cross-validation: out-of-sample accuracy and what each fold chose")
+    p5.add_argument("folder", metavar="DIR", help="folder of videos and/or event recordings with labels.csv")
+    add_output_option(p5, default="cdnf_experiments/tune")
+    p5.add_argument("--param", action="append", default=[], metavar="NAME=SPEC",
+                    help="a parameter and its search space: NAME=LO:HI (uniform), NAME=LO:HI:log or NAME=V1,V2,... "
+                         "(a choice); repeat for several")
+    p5.add_argument("--trials", type=_nonneg_int, default=20, help="Optuna trials per outer fold (default 20)")
+    p5.add_argument("--folds", type=_nonneg_int, default=0,
+                    help="outer (and inner) cross-validation folds (default 0: leave-one-out)")
+    p5.add_argument("--downscale", type=float, default=1.0,
+                    help="resize every frame by this factor in (0, 1] (default 1: native size)")
+    _add_dataset_options(p5, rain_default="off", one_model=True)
     args = ap.parse_args(list(argv))
+    if args.which == "tune":
+        return _tune(args)
 
     if args.which in ("sweep", "selectivity"):
         check_model_options(args)

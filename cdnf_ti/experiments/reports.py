@@ -11,7 +11,7 @@ import numpy as np
 from ..atomic import atomic_write_json, atomic_write_text
 from ..models.base import Trace
 from ..paper import TABLE2
-from .benchmark_reports import write_benchmark
+from .benchmark_reports import benchmark_markdown, write_benchmark
 from .clipscores import (
     IN_SAMPLE_NOTE,
     bootstrap_accuracy,
@@ -227,9 +227,10 @@ def summary_markdown(run: "DatasetRun", summary: Mapping, specs: Mapping) -> str
             lt = d["mean_lead_time_ms"]
             L.append(f"| {m} | {c} | {d['TP']} | {d['TN']} | {d['FP']} | {d['FN']} "
                      f"({d['FN_early']}/{d['FN_late']}/{d['FN_none']}) | {d['errors']} | {pct(d['accuracy'])} | "
-                     f"{'' if lt is None else f'{lt:.0f} ms'} |")
+                     f"{'' if lt is None else f'{lt / 1000:.2f} s'} |")
     L += scores_markdown(run, summary)
     L += lead_time_markdown(run, summary)
+    L += benchmark_markdown(summary.get("benchmark") or {})
     L += ["", "## First alert per clip (frame, outcome; lead time before contact)", ""]
     cols = [(m, c) for m in run.models for c in run.conditions]
     L.append("| Clip | Label | Window (padded) | Contact | " + " | ".join(f"{m} {c}" for m, c in cols) + " |")
@@ -251,7 +252,7 @@ def summary_markdown(run: "DatasetRun", summary: Mapping, specs: Mapping) -> str
             txt = "none" if fa in (None, "") else str(fa)
             txt += f" {r['outcome']}" + (f" ({r['fn_reason']})" if r["fn_reason"] else "")
             if r.get("lead_time_ms") not in (None, ""):
-                txt += f", {float(r['lead_time_ms']):.0f} ms"
+                txt += f", {float(r['lead_time_ms']) / 1000:+.2f} s"
             cells.append(txt)
         L.append(f"| {lab.clip} | {lab.label} | {win} | {'' if lab.contact_frame is None else lab.contact_frame} | "
                  + " | ".join(cells) + " |")
@@ -306,8 +307,8 @@ def scores_table(run: "DatasetRun", summary: Mapping) -> tuple[list[str], list[l
             lt = d["lead_times"]
             lead = f"{lt['hits_before_contact']}"
             if lt["hit_lead_median_ms"] is not None:
-                lead += (f", {lt['hit_lead_median_ms']:.0f} ms ({lt['hit_lead_min_ms']:.0f}-"
-                         f"{lt['hit_lead_max_ms']:.0f})")
+                lead += (f", {lt['hit_lead_median_ms'] / 1000:.2f} s ({lt['hit_lead_min_ms'] / 1000:.2f}-"
+                         f"{lt['hit_lead_max_ms'] / 1000:.2f})")
             held = d.get("held")
             best = d["in_sample_best"]
             rows.append([m, c, pct_ci(d["accuracy_ci"]), "n/a" if d["auc"] is None else f"{d['auc']:.3f}",
@@ -340,7 +341,7 @@ def scores_markdown(run: "DatasetRun", summary: Mapping) -> list[str]:
          f"- CV accuracy: {any_cv} cross-validation; each clip is scored at the alert level chosen on the other "
          "clips only (out-of-sample).",
          f"- Best level: {IN_SAMPLE_NOTE}.",
-         "- Lead time: ms before the contact frame of first alerts inside the window; hits at or after contact "
+         "- Lead time: seconds before the contact frame of first alerts inside the window; hits at or after contact "
          "warn of nothing and are counted separately.",
          f"- never alerts (baseline): a model that never alerts scores the share of non-collision clips, "
          f"{pct(summary.get('never_alerts_accuracy'))} here.",
@@ -398,11 +399,9 @@ def write_reports(run: "DatasetRun", dataset: str, labels_path: str, seed: int, 
     atomic_write_text(out / "threshold_sweep.csv", csv_text(run.sweep, SWEEP_COLUMNS))
     scores = honest_scores(run, traces, specs, seed=seed)
     run.summary = summary_dict(run, specs, dataset, labels_path, seed, scores)
-    bench, bench_md, bench_pngs = write_benchmark(run, traces, fmt, annotations, seed, figures)
-    run.summary["benchmark"] = bench
+    run.summary["benchmark"], bench_pngs = write_benchmark(run, traces, fmt, annotations, seed, figures)
     atomic_write_json(out / "summary.json", run.summary)
     markdown = summary_markdown(run, run.summary, specs)
-    markdown = "\n".join([*markdown.rstrip("\n").split("\n"), *bench_md, ""])
     atomic_write_text(out / "summary.md", markdown)
     pngs: list = []
     if figures:
