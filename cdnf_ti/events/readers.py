@@ -12,7 +12,9 @@ Formats (recognised by content first, then by extension):
                    ``ms_to_idx`` (not needed to read); ``h5py`` and, for DSEC's Blosc-compressed
                    files, ``hdf5plugin``; sensor size from root attributes ``width``/``height``
                    when present
-``.npy``           a structured array with fields ``t`` (µs), ``x``, ``y``, ``p`` (read memory-mapped)
+``.npy``           a structured array with fields ``t`` (µs), ``x``, ``y``, ``p`` (read memory-mapped);
+                   ``t`` is in ms when a ``sim_data.npz`` with ``t_end`` and ``dt`` sits beside it
+                   (the layout of Schubert et al.'s looming data sets, ``p`` 0 or 1)
 ``.npz``           the same fields as four arrays ``t``, ``x``, ``y``, ``p``, or one structured
                    array (an ``.npz`` is read whole: zip members cannot be memory-mapped)
 =================  ===========================================================================
@@ -213,6 +215,23 @@ def _check_columns(path: str, names, where: str) -> None:
 
 
 # -- NumPy ---------------------------------------------------------------------------------------
+#: The metadata file beside an ``.npy`` whose ``t`` is in ms (Schubert et al.'s sequences:
+#: ``events.npy`` and ``sim_data.npz`` with ``t_end`` and ``dt`` in ms, among others).
+MS_SIDECAR = "sim_data.npz"
+
+
+def times_in_ms(path: str | os.PathLike) -> bool:
+    """Whether the ``.npy`` at ``path`` has ``t`` in ms: a :data:`MS_SIDECAR` with ``t_end`` and ``dt`` beside it."""
+    sidecar = Path(path).with_name(MS_SIDECAR)
+    if not sidecar.is_file():
+        return False
+    try:
+        with np.load(sidecar, allow_pickle=False) as z:
+            return {"t_end", "dt"} <= set(z.files)
+    except Exception:  # noqa: BLE001 - an unreadable sidecar is no sidecar: t stays in µs
+        return False
+
+
 def _open_npy(path: str) -> EventFile:
     try:
         arr = np.load(path, mmap_mode="r", allow_pickle=False)
@@ -225,10 +244,13 @@ def _open_npy(path: str) -> EventFile:
     if arr.ndim != 1:
         raise InputError(path, f"event array must be one-dimensional, got shape {arr.shape}")
 
+    us_per_tick = 1000 if times_in_ms(path) else 1
+
     def gen() -> Iterator[np.ndarray]:
         for i in range(0, arr.shape[0], CHUNK_EVENTS):
             c = arr[i:i + CHUNK_EVENTS]
-            yield to_events(c["t"], c["x"], c["y"], c["p"], path, i)
+            t = c["t"] if us_per_tick == 1 else np.asarray(c["t"], dtype=np.float64) * us_per_tick
+            yield to_events(t, c["x"], c["y"], c["p"], path, i)
 
     return EventFile(path, "npy", None, int(arr.shape[0]), gen, t_start=0)
 
