@@ -23,6 +23,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .. import paths
 from ..errors import InputError
 from .labels import ClipLabel, frame_at
 
@@ -117,15 +118,16 @@ def from_clip_label(label: ClipLabel, fps: float, path: Path | None = None) -> A
 
 
 def inside(folder: str | os.PathLike, name: str, annotation_file: str | os.PathLike) -> Path:
-    """``folder / name``, refused unless it stays inside ``folder`` once links are resolved.
+    """``folder / name`` (:func:`cdnf_ti.paths.inside`), also refused where a link leads out of ``folder``.
 
     Names read from an annotation file are untrusted: an absolute name, ``..`` or a link out of the
     dataset folder is an :class:`~cdnf_ti.errors.InputError` naming the annotation file.
     """
-    base = Path(folder).resolve()
-    if not name or "\x00" in name or Path(name).is_absolute():
-        raise InputError(annotation_file, f"name {name!r} is not a file name inside {folder}")
-    cand = (base / name).resolve()
+    try:
+        path = paths.inside(folder, name)
+    except paths.PathEscapeError as e:
+        raise InputError(annotation_file, f"name {name!r} is not a file name inside {folder} ({e})") from None
+    base, cand = Path(folder).resolve(), path.resolve()
     if cand != base and base not in cand.parents:
         raise InputError(annotation_file, f"name {name!r} points outside the dataset folder {folder}")
     return cand
