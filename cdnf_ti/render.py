@@ -500,7 +500,9 @@ def open_render_input(source: str | Path, fps: float | None = None, color_order:
     (binned as ``events`` says), else a frame source (:func:`~cdnf_ti.inputs.resolve_input`)."""
     if is_event_file(source):
         ev = events or {}
-        return open_event_source(source, ev.get("sensor_size"), ev.get("bin_ms", DEFAULT_BIN_MS), quiet=quiet)
+        limits = {k: ev[k] for k in ("max_gap_s", "max_span_s") if k in ev}  # --max-gap-s, --max-span-s
+        return open_event_source(source, ev.get("sensor_size"), ev.get("bin_ms", DEFAULT_BIN_MS), quiet=quiet,
+                                 **limits)
     return resolve_input(source, fps=fps, color_order=color_order)
 
 

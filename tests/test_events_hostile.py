@@ -135,6 +135,16 @@ def test_max_gap_s_admits_a_recording_with_a_long_pause(tmp_path, capsys):
     assert sum(1 for _ in open_event_source(f, SIZE, max_gap_s=120).counts()) == n_bins
 
 
+
+def test_render_takes_the_time_limits_of_its_options(tmp_path):
+    from cdnf_ti.render import open_render_input
+
+    f = write_recording(tmp_path / "pause.npy", jumped(5_000_000))
+    assert sum(1 for _ in open_render_input(f, events={"sensor_size": SIZE}).counts()) > 150
+    with pytest.raises(InputError, match="at most --max-gap-s 1 s"):
+        list(open_render_input(f, events={"sensor_size": SIZE, "max_gap_s": 1.0}).counts())
+
+
 @linux_only
 @pytest.mark.parametrize("command", [["run", "--no-progress", "--out", "{tmp}/out"], ["events", "--info"]])
 def test_a_huge_timestamp_jump_is_one_error_line_within_the_memory_cap(command, tmp_path):
