@@ -395,8 +395,8 @@ def _count_compile(what: str = "") -> None:
     scope = getattr(_notice_state, "scope", None)
     if scope is not None:
         scope.compiled()
-    elif what:
-        _announce(f"the {what} kernels")
+    elif what and _announce(what):  # e.g. "stimuli": the generators of stim: inputs and rain (no duration line)
+        _remember(what)
 
 
 # -- compile notices -------------------------------------------------------------------------------

@@ -73,6 +73,16 @@ def test_kernels_compiled_into_this_cache_before_are_not_announced_again(fresh, 
     assert _lines(capsys) == []
 
 
+def test_kernels_compiled_outside_a_model_step_are_announced_once_per_cache(fresh, monkeypatch, capsys):
+    rt._count_compile("stimuli")
+    rt._count_compile("stimuli")
+    assert _lines(capsys) == [f"compiling kernels for stimuli, first time only; cached in {fresh}"]
+    monkeypatch.setattr(rt, "_seen", None)  # a new process with the same cache folder
+    monkeypatch.setattr(rt, "_announced", set())
+    rt._count_compile("stimuli")
+    assert _lines(capsys) == []
+
+
 def test_steps_that_compile_nothing_print_nothing(fresh, capsys):
     _steps("toy at 8x6", [0, 0, 0])
     assert _lines(capsys) == []
