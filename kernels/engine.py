@@ -94,7 +94,7 @@ class Coef:
 
 
 class Coefs(_Names):
-    """The coefficients of a model by name and size: ``Coefs(k_on=6, a1=1)``."""
+    """The coefficients of a model by name and size: ``Coefs(k_on=6, a1=1)``; size 0 (last only): any length."""
 
     def __init__(self, **sizes: int):
         items, slot = {}, 0
@@ -124,7 +124,7 @@ def coefficient_array(coefs: Coefs, values: dict) -> "list[float]":
     for c in coefs:
         v = values[c.name]
         v = list(v) if hasattr(v, "__len__") else [v]
-        if len(v) != c.size:
+        if len(v) != c.size and not (c.size == 0 and c is list(coefs)[-1]):  # size 0, last: any length
             raise ValueError(f"coefficient {c.name}: {c.size} values, got {len(v)}")
         out += [float(x) for x in v]
     return out or [0.0]
