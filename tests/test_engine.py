@@ -68,7 +68,7 @@ def test_no_kernel_or_func_is_called_with_more_than_twelve_parameters_counting_t
     widths = _widths()
     # the count covers the lane solves and the generic kernels of every model (not a vacuous pass)
     assert {"cdnf.py:lanes_contrast_solve", "cdnf.py:contrast_solve", "lgmd.py:flgmd_lanes_solve",
-            "lgmd.py:lgmd1_lanes_layers", "sdnf.py:field_update", "engine.py:run_lanes", "engine.py:run_pixels",
+            "lgmd.py:lgmd1_lanes_layers", "sdnf.py:field", "engine.py:run_lanes", "engine.py:run_pixels",
             "olgmd.py:photoreceptors", "olgmd.py:summation",
             "lplc2.py:lanes_arms"} <= set(widths)
     assert {k: v for k, v in widths.items() if v > 12} == {}
