@@ -1,8 +1,8 @@
-"""Dump the traces of the five models on the fast path, to compare two versions of the engine bit for bit.
+"""Dump the traces of every registered model on the fast path, to compare two versions of the engine bit for bit.
 
 Run with the interpreter of each version (it uses the public API only)::
 
-    python bench/trace_dump.py before.npz [--clip CLIP.mp4] [--frames N]
+    python bench/trace_dump.py before.npz [--clip CLIP.mp4] [--frames N] [--models olgmd,lplc2]
     python bench/trace_dump.py after.npz ...
     python bench/trace_dump.py --compare before.npz after.npz
 
@@ -17,8 +17,6 @@ import argparse
 import sys
 
 import numpy as np
-
-MODELS = ("cdnf", "sdnf", "lgmd1", "lgmd2", "flgmd_onn")
 
 
 def _stimuli(clip: str | None, n: int) -> dict[str, list[np.ndarray]]:
@@ -42,12 +40,13 @@ def _stimuli(clip: str | None, n: int) -> dict[str, list[np.ndarray]]:
     return out
 
 
-def dump(path: str, clip: str | None, n: int) -> None:
-    from cdnf_ti import create_model
+def dump(path: str, clip: str | None, n: int, models: list[str] | None = None) -> None:
+    """Run ``models`` (default: every registered model) on the stimuli and save their traces to ``path``."""
+    from cdnf_ti import MODELS, create_model
 
     arrays = {}
     for sname, frames in _stimuli(clip, n).items():
-        for name in MODELS:
+        for name in models or list(MODELS):
             tr = create_model(name).run(frames)
             arrays[f"{sname}/{name}/output"] = tr.output
             arrays[f"{sname}/{name}/spike"] = tr.spike
@@ -76,10 +75,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--compare", action="store_true")
     ap.add_argument("--clip")
     ap.add_argument("--frames", type=int, default=40)
+    ap.add_argument("--models", default=None, help="comma-separated model names (default: every registered model)")
     a = ap.parse_args(argv)
     if a.compare:
         return compare(*a.paths)
-    dump(a.paths[0], a.clip, a.frames)
+    dump(a.paths[0], a.clip, a.frames, a.models.split(",") if a.models else None)
     return 0
 
 

@@ -28,29 +28,15 @@ from ._version import __version__
 from .backends import ENGINE as _ENGINE
 from .errors import InputError
 from .frames import FrameSource, iter_grey, open_source, to_grey
-from .models import (
-    CDNF,
-    LGMD1,
-    LGMD2,
-    MODELS,
-    SDNF,
-    FLGMDONn,
-    FLGMDParams,
-    LGMD1Params,
-    LGMD2Params,
-    Model,
-    SDNFParams,
-    StepResult,
-    Trace,
-    create_model,
-    get_model_class,
-    register_model,
-)
+from .models import MODELS, Model, StepResult, Trace, create_model, get_model_class, register_model
 from .params import CDNFParams
 
 Model.engine = _ENGINE  # the models' compiled backends come from the engine (cdnf_ti.backends)
 
-__all__ = ["CDNF", "CDNFParams", "LGMD2", "LGMD2Params", "LGMD1", "LGMD1Params", "SDNF", "SDNFParams",
-           "FLGMDONn", "FLGMDParams", "Model", "StepResult", "Trace", "MODELS", "create_model",
-           "get_model_class", "register_model", "InputError", "FrameSource", "open_source",
-           "iter_grey", "to_grey", "__version__"]
+#: Every registered model class and its parameters' class, by class name (``from cdnf_ti import OLGMD, LPLC2``).
+_EXPORTS = {c.__name__: c for m in MODELS.values() for c in (m, m.params_type) if c is not object}
+globals().update(_EXPORTS)
+
+__all__ = ["CDNFParams", "Model", "StepResult", "Trace", "MODELS", "create_model", "get_model_class",
+           "register_model", "InputError", "FrameSource", "open_source", "iter_grey", "to_grey", "__version__"]
+__all__ += sorted(set(_EXPORTS) - set(__all__))

@@ -46,18 +46,7 @@ def grey_levels(grey: np.ndarray) -> np.ndarray:
     return eight_bit(grey).astype(np.float64)
 
 
-def neighbour_sums(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Sums of the 4 edge and the 4 diagonal neighbours (replicate border).
 
-    Returns
-    -------
-    edge, diag : ndarray, shape (H, W)
-    """
-    xp = np.pad(x, 1, mode="edge")
-    h, w = x.shape
-    edge = xp[0:h, 1 : w + 1] + xp[2 : h + 2, 1 : w + 1] + xp[1 : h + 1, 0:w] + xp[1 : h + 1, 2 : w + 2]
-    diag = xp[0:h, 0:w] + xp[0:h, 2 : w + 2] + xp[2 : h + 2, 0:w] + xp[2 : h + 2, 2 : w + 2]
-    return edge, diag
 
 
 def kernel_3x3(centre: float, edge: float, diag: float) -> np.ndarray:

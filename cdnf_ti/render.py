@@ -61,27 +61,18 @@ from .experiments.layout import trace_path
 from .frames import iter_grey, to_grey
 from .inputs import resolve_input
 from .limits import check_frame_size
-from .models import create_model
+from .models import create_model, get_model_class
 from .models.base import NotConvergedWarning
 from .paths import inside
 from .stimuli.rain import RainParams, RainyFrames
 from .video import codec_for, write_video
 
-#: Fields shown per model (first three found), and their colour scale: "signed" (symmetric about 0) or "pos".
-FIELD_CHOICES = {
-    "cdnf": [("u_on", "ON field u_on"), ("u_off", "OFF field u_off"), ("v", "Summation field v")],
-    "lgmd2": [("ON", "ON"), ("OFF", "OFF"), ("S", "Summation S")],
-    "lgmd1": [("ON", "ON"), ("OFF", "OFF"), ("S", "Summation S")],
-    "flgmd_onn": [("ON", "ON"), ("OFF", "OFF"), ("S", "Summation S")],
-    "olgmd": [("OFF", "OFF P_off"), ("S", "Summation S"), ("G", "Grouping G")],
-    "lplc2": [("horizontal", "EMD left - right"), ("vertical", "EMD up - down"), ("lplc2", "LPLC2 response")],
-}
 PANEL_FONT = cv2.FONT_HERSHEY_SIMPLEX
 TRACE_H = 170
 
 
 def _pick_fields(model_name: str, fields: dict[str, np.ndarray]) -> list[tuple[str, str]]:
-    pref = [(k, t) for k, t in FIELD_CHOICES.get(model_name, []) if k in fields]
+    pref = [(k, t) for k, t in get_model_class(model_name).panels if k in fields]  # the model's declared panels
     rest = [(k, k) for k in fields if k not in dict(pref) and k != "P"]
     return (pref + rest)[:3]
 

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Iterator, Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -276,13 +276,6 @@ def _solve_plain(iterate, n_fields, tol, max_iter, damping, min_damping, stall_p
             break
     iters = tuple(first_ok[f] if first_ok[f] else max_iter for f in range(n_fields))
     return SolveReport(iters, tuple(float(r) for r in res), False, lam)
-
-
-def iter_schedule(bounds: tuple[float, float]) -> Iterator[Coef]:
-    """Endless Chebyshev coefficients for ``bounds`` (for backends and tests)."""
-    s = ChebyshevSchedule(*bounds)
-    while True:
-        yield s.next()
 
 
 # -- the local start ------------------------------------------------------------------------

@@ -553,9 +553,10 @@ def lanes() -> int:
     return lane_count(_compiler)  # type: ignore[arg-type]
 
 
-def kernels(name: str):
+def kernels(name):
     """The kernels of ``kernels/<name>.py`` (``"cdnf"``, ``"lgmd"``, ``"sdnf"``, ``"stimuli"``, ``"common"``),
-    built for this process's compiler and lane count on first use (the module's ``build(ti, lanes)``).
+    built for this process's compiler and lane count on first use (the module's ``build(ti, lanes)``);
+    ``name`` may also be a ``build(ti, lanes)`` function itself (a model defined outside the package).
 
     The kernel modules define their kernels in that factory, so importing them loads no compiler; this
     is the one place that builds them, once per process (a second model compiles nothing new).
@@ -565,9 +566,9 @@ def kernels(name: str):
         got = _built.get(name)
         if got is None:
             ti = dsl()
-            module = importlib.import_module(f"{__package__}.kernels.{name}")
-            _count_compile(name)
-            got = _built[name] = module.build(ti, lanes())
+            build = name if callable(name) else importlib.import_module(f"{__package__}.kernels.{name}").build
+            _count_compile(name if isinstance(name, str) else getattr(name, "__module__", ""))
+            got = _built[name] = build(ti, lanes())
         return got
 
 

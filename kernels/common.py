@@ -332,21 +332,6 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
 
     @ti.func
-    def luminance_change(frame: ti.template(), L: ti.template(), P: ti.template(), i, j, n: ti.template(), scale, keep,
-                         grey_levels: ti.template()):
-        """Photoreceptors on the run ``(i, j .. j + n - 1)``: ``g = frame * scale`` (rounded to
-        integer grey levels when ``grey_levels``), ``P = keep (g - L)`` (``keep = 0`` on the
-        first frame), ``L = g``. Returns ``P``."""
-        g = run_load(frame, i, j, n) * scale
-        if ti.static(grey_levels):
-            g = ti.floor(g + 0.5)
-        p = keep * (g - run_load(L, i, j, n))
-        run_store(L, i, j, g, n)
-        run_store(P, i, j, p, n)
-        return p
-
-
-    @ti.func
     def run_sum(v, n: ti.template()):
         """Sum of the n values of ``v``, accumulated in float64."""
         s = ti.f64(0.0)
@@ -636,14 +621,6 @@ def build(ti, lanes: int) -> SimpleNamespace:
             lo[l] = b[l - 1]
             hi[l - 1] = b[l]
         return lo, hi
-
-
-    @ti.func
-    def record_residuals(rbuf: ti.template(), record: ti.template(), fields: ti.template()):
-        """Copy the residuals of a launch (``rbuf[j, f]``, -1: not run) into its record (serial tail)."""
-        for j in ti.static(range(MAX_STEPS)):
-            for f in ti.static(range(fields)):
-                record[j, RECORD_COEFS + f] = rbuf[j, f]
 
 
     @ti.func

@@ -71,12 +71,6 @@ def build(ti, lanes: int) -> SimpleNamespace:
         return h, a * on + (1.0 - a) * fd_on, a * off + (1.0 - a) * fd_off
 
     @ti.func
-    def half_detectors(x0, fd0, x1, fd1):
-        """Opponent Hassenstein-Reichardt pair between a pixel (``x0``, its delayed ``fd0``) and its neighbour
-        (``x1``, ``fd1``): ``x0 fd1 - fd0 x1`` (towards the pixel minus away from it)."""
-        return x0 * fd1 - fd0 * x1
-
-    @ti.func
     def opponent_motion(f_h: ti.template(), fd_on: ti.template(), fd_off: ti.template(), y, x, on_t, off_t):
         """``(leftward - rightward, upward - downward)`` of grid point (y, x), ON and OFF summed."""
         on0, off0 = on_off(f_h[y, x], on_t, off_t)

@@ -56,11 +56,11 @@ count and equal to the NumPy reference backend.
 """
 from __future__ import annotations
 
-from typing import Iterator, Sequence
+from typing import Iterator
 
 import numpy as np
 
-from .basic import BASIC_STIMULI, BasicStimulus, basic_stimulus, check_seed, taichi_stimulus_kernels
+from .basic import BasicStimulus, basic_stimulus, check_seed, taichi_stimulus_kernels
 
 BACKGROUND, KEPT, DISPLACED, TARGET = 0, 1, 2, 3
 BACKENDS = ("taichi", "numpy")
@@ -403,20 +403,3 @@ def luminance_change_match(stim: IncoherentStimulus) -> dict:
     corr = float(np.corrcoef(inc, coh)[0, 1]) if n > 1 and inc.std() > 0 and coh.std() > 0 else float("nan")
     return {"ratio": ratio, "mean_abs_rel_err": rel, "corr": corr, "frames": int(n), "halted_at": stim.halted_at,
             "held_frames": stim.held_frames}
-
-
-def luminance_match_table(coherences: Sequence[float] = (1.0, 0.95, 0.75, 0.5, 0.2, 0.05),
-                          names: Sequence[str] = BASIC_STIMULI, size: int = 600, seed: int = 0) -> str:
-    """Markdown table of :func:`luminance_change_match` ratios (mean |rel. err|) per stimulus and c."""
-    head = "| Stimulus | " + " | ".join(f"c={c:g}" for c in coherences) + " |"
-    lines = [head, "|---|" + "---|" * len(coherences)]
-    for name in names:
-        cells = []
-        for c in coherences:
-            s = incoherent_stimulus(name, c, seed, height=size, width=size)
-            m = luminance_change_match(s)
-            halt = "" if m["halted_at"] is None else f", halt@{m['halted_at']}"
-            halt += f", held {m['held_frames']}" if m["held_frames"] else ""
-            cells.append(f"{m['ratio']:.3f} ({m['mean_abs_rel_err']:.3f}{halt})")
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)

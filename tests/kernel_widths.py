@@ -20,13 +20,16 @@ import numpy as np
 
 def leaves(value) -> int:
     """How many parameters ``value`` stands for: 1, or the members of a tuple, list, namespace or
-    dataclass instance (a context however it is spelt), recursively."""
+    dataclass instance or object with ``__slots__`` (a context however it is spelt), recursively."""
     if isinstance(value, (tuple, list)):
         return sum(leaves(v) for v in value)
     if isinstance(value, types.SimpleNamespace):
         return sum(leaves(v) for v in vars(value).values())
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         return sum(leaves(getattr(value, f.name)) for f in dataclasses.fields(value))
+    slots = [s for cls in type(value).__mro__ for s in getattr(cls, "__slots__", ())]
+    if slots and not isinstance(value, type):  # an object of named members (the engine's cell accessor)
+        return sum(leaves(getattr(value, s)) for s in slots)
     return 1
 
 

@@ -109,7 +109,9 @@ def test_the_gpu_work_partition_computes_the_reference_result(name, monkeypatch)
     model = create_model(name)
     model.fast = False  # the generic kernels, which GPUs run
     got = model.run(frames)
-    if name in PER_PIXEL:  # its generic kernels give a GPU one work item per pixel
+    if model.kernels is not None:  # the engine's pixel layout: one work item per pixel
+        assert model._be.lane is False
+    elif name in PER_PIXEL:  # its generic kernels give a GPU one work item per pixel
         assert type(model._be).__name__ == "TaichiLPLC2Backend"
     else:
         assert model._be.blocks == 5  # 70 px: five runs of 16 columns, the last one partial

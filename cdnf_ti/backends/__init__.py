@@ -7,14 +7,16 @@ package). Importing this package loads no compiler: the runtime starts when the 
 model with the ``"taichi"`` backend is made, and the kernels are built then
 (:func:`cdnf_ti.taichi_runtime.kernels`).
 
-A new model registers its backend factory with :func:`register_backend`.
+A model that names its kernel module (``Model.kernels``) runs on the one generic backend,
+:class:`~cdnf_ti.backends.engine.Backend`; :func:`register_backend` remains for the models not yet on it.
 """
 from __future__ import annotations
 
 from typing import Any, Callable
 
 from .. import taichi_runtime
-from . import cdnf, lgmd, lplc2, olgmd, sdnf
+from . import cdnf, lgmd, lplc2
+from .engine import Backend
 
 #: Backend factories by model name: ``factory(model, shape, arch) -> backend``.
 FACTORIES: dict[str, Callable[[Any, tuple[int, int], str], Any]] = {}
@@ -57,6 +59,8 @@ class Engine:
         # the model's own name, else the nearest base class's (a subclass that changes no equations)
         names = [model.name] + [c.__dict__["name"] for c in type(model).__mro__ if "name" in c.__dict__]
         factory = next((FACTORIES[n] for n in names if n in FACTORIES), None)
+        if factory is None and getattr(model, "kernels", None) is not None:
+            factory = Backend
         if factory is None:
             raise NotImplementedError(f"{type(model).__name__} has no compiled backend "
                                       "(cdnf_ti.backends.register_backend)")
@@ -68,8 +72,6 @@ ENGINE = Engine()
 
 
 register_backend("cdnf", cdnf.make_backend)
-register_backend("sdnf", sdnf.make_backend)
-register_backend("olgmd", olgmd.make_backend)
 for _name in lgmd.FAMILY:
     register_backend(_name, lgmd.make_backend)
 register_backend("lplc2", lplc2.make_backend)

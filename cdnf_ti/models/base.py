@@ -281,6 +281,12 @@ class Model:
     #: states equations and control only and never imports the compiler.
     engine: ClassVar[Any] = None
 
+    #: The model's kernel module (a module name under ``kernels/``, or a ``build(ti, lanes)`` function): its
+    #: compiled backend is then the engine's one generic backend (``cdnf_ti.backends.engine``).
+    kernels: ClassVar[Any] = None
+    #: The fields ``render`` shows first: ``(field name, panel title)`` pairs.
+    panels: ClassVar[tuple[tuple[str, str], ...]] = ()
+
     #: Threshold sweep (:class:`Sweepable`): defaults; a model opts in by defining ``sweep_alerts``.
     #: whether the model has an ON/OFF input stage for event bins (:meth:`step_on_off`)
     takes_events: ClassVar[bool] = False

@@ -115,7 +115,10 @@ class OLGMD(Model):
     description = ("oLGMD (Gao et al. 2024): LGMD2 with polarity-specific feed-forward inhibition; "
                    "equations from the authors' Python")
 
-    #: Use the fast (lane) backend where it applies; ``False``: the generic kernels (same equations).
+    #: The stages (``kernels/olgmd.py``) and the fields ``render`` shows.
+    kernels = "olgmd"
+    panels = (("OFF", "OFF P_off"), ("S", "Summation S"), ("G", "Grouping G"))
+    #: Use the fast (lane) layout where it applies; ``False``: the pixel layout (same equations).
     fast: bool = True
 
     #: Threshold sweep: the spike sum at which the alert fires (replayed from ``spike_sum``).
@@ -161,6 +164,20 @@ class OLGMD(Model):
     def _numpy_backend(self, shape: tuple[int, int]) -> Any:
         return _ReferenceBackend(self, shape)
 
+    def coefficients(self) -> dict[str, Any]:
+        """The stages' coefficients by name: ON / OFF weights ``K a`` and ``K (1 - a)`` (``a = dt / (dt + tau)``),
+        the channels' persistence ``a1``, ``o = (o1, o2, o3)`` and the grouping's constants."""
+        p, dt = self.params, self.dt
+        out = {}
+        for name, weights, taus in (("k_on", p.w_on, p.t_on), ("k_off", p.w_off, p.t_off)):
+            a = [dt / (dt + tau) for tau in taus]
+            out[name] = [w * ai for w, ai in zip(weights, a)] + [w * (1.0 - ai) for w, ai in zip(weights, a)]
+        return dict(out, a1=p.a1, o=(p.o1, p.o2, p.o3), cw=p.cw, delta_c=p.delta_c, cde=p.cde, tde=p.tde)
+
+    def borders(self) -> dict[str, str]:
+        """``code``: the outermost ring of ``S`` zero and reflect-101 around it; ``paper``: replicate."""
+        return {"S": "reflect+ring"} if self.code else {}
+
     def _prepare(self, frame: np.ndarray) -> np.ndarray:
         """``variant="code"`` makes BGR uint8 frames grey with ``COLOR_RGB2GRAY``, as the authors' code."""
         f = np.asarray(frame)
@@ -174,7 +191,11 @@ class OLGMD(Model):
             return self._result(t, loaded, {})
         be = self._be
         active = t >= self.first
-        sums = be.photoreceptors(active, *self._persistence(t))
+        if active:
+            be.flip()  # this frame's P, P_on, P_off go to the older buffers
+        a_1, a_2 = self._persistence(t)
+        sums = be.launch("load", scale=1.0 if grey.dtype == np.uint8 else 255.0, active=float(active), a_1=a_1,
+                         a_2=a_2)
         if not active:
             self.spikes.append(0.0)
             return self._result(t, ref.OLGMDStep(0.5, 0.5, 0.0, sum(self.spikes), False, 0.0, 0.0, 0.0), {})
@@ -185,7 +206,8 @@ class OLGMD(Model):
         gates = (pm_on >= p.th_on, pm_off >= p.th_off)
         before = (1.0, 1.0) if not self.code else tuple(float(g) for g in self.open_before)
         silent = tuple(wi * c > 1.0 for wi, c in zip(w, self.self_inhibition))
-        sum_g, max_ce = be.layers(w, (gates[0] and not silent[0], gates[1] and not silent[1]), before)
+        max_ce, sum_g = be.launch("layers", w1=w[0], w2=w[1], gate_on=float(gates[0] and not silent[0]),
+                                  gate_off=float(gates[1] and not silent[1]), prev_on=before[0], prev_off=before[1])
         self.open_before = gates
         step = self._membrane(sum_g, n_cells, pm_on, pm_off)
         extra = dict(w1=w[0], w2=w[1], gate_on=int(gates[0]), gate_off=int(gates[1]), sum_G=sum_g, max_Ce=max_ce)

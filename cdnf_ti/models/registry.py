@@ -1,9 +1,10 @@
 """The model registry: every model behind one interface, looked up by name.
 
-A new model is one file: a :class:`~cdnf_ti.models.base.Model` subclass
-decorated with :func:`register_model`, imported by :mod:`cdnf_ti.models`
-(or by the program that defines it). Registered models are what the command
-line's ``--models`` and :func:`create_model` accept.
+A model is registered by its class: a :class:`~cdnf_ti.models.base.Model` subclass decorated with
+:func:`register_model`, which names its kernel module (``kernels``) and its ``render`` panels
+(``panels``), imported by :mod:`cdnf_ti.models` (or by the program that defines it). Registered
+models are what the command line's ``--models``, :func:`create_model`, ``render``, the bench and
+the tests' parametrisations take; ``cdnf_ti`` exports every built-in one.
 """
 from __future__ import annotations
 
@@ -42,6 +43,8 @@ def register_model(cls: M) -> M:
         raise TypeError(f"register_model: {cls!r} is not a Model subclass")
     if not cls.name:
         raise ValueError(f"{cls.__name__} has no registry name")
+    if not all(isinstance(p, tuple) and len(p) == 2 for p in cls.panels):
+        raise ValueError(f"{cls.__name__}.panels must be (field, title) pairs")
     for name, other in MODELS.items():
         same = other is cls or (other.__module__, other.__qualname__) == (cls.__module__, cls.__qualname__)
         if _key(name) == _key(cls.name) and not same:

@@ -1,0 +1,141 @@
+"""The one backend of the engine's models: the declared planes, the coefficients by name, the launches.
+
+A model names its kernel module (``Model.kernels``: a module of ``kernels/``, or a ``build(ti, lanes)``
+function); the module declares its planes, coefficients and launch scalars
+(:mod:`cdnf_ti.kernels.engine`). :class:`Backend` allocates the planes (lane arrays on the fast CPU
+path, (planes, H, W) arrays elsewhere), fills the coefficients from ``model.coefficients()`` by name,
+and runs a launch with :meth:`Backend.launch`. The model's control (its ``_step``) calls the launches.
+"""
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..kernels import engine
+from ..kernels.common import LaunchRecord
+from ..kernels.schedule import MAX_WORKERS
+from ..taichi_runtime import cpu_threads, dsl, ensure_taichi, kernels, lanes
+from .workspace import Scratch, event_bin
+
+
+class Backend:
+    """The state of an engine model for frames of ``shape`` (H, W), and its launches.
+
+    Parameters
+    ----------
+    model : Model
+        Reads ``kernels`` (its kernel module), ``coefficients()`` (a dict by coefficient name),
+        ``borders()`` (plane name -> border, optional), ``kernel_options()`` (compile-time values by name,
+        optional: ``a.option(name)`` in a stage), ``fast`` (use the lane layout where it applies).
+    shape : (H, W)
+    arch : str
+        ``cpu``: the lane layout for frames at least two lane vectors wide; else the pixel layout.
+    """
+
+    name = "taichi"
+
+    def __init__(self, model: Any, shape: tuple[int, int], arch: str = "cpu"):
+        arch = ensure_taichi(arch)
+        ti = dsl()
+        self.M = kernels(model.kernels)
+        self.shape = H, W = tuple(int(s) for s in shape)
+        self.lane = getattr(model, "fast", True) and arch == "cpu" and W >= 2 * lanes()
+        self.modes = engine.borders(self.M.planes, model.borders() if hasattr(model, "borders") else {})
+        self.options = tuple(sorted(model.kernel_options().items())) if hasattr(model, "kernel_options") else ()
+        n = self.M.planes.count
+        if self.lane:
+            C = kernels("common")
+            self.x = C.lane_array(n, H=H, NB=C.lane_layout(W)[1])
+        else:
+            self.x = ti.ndarray(ti.f32, (n, H, W))
+        values = engine.coefficient_array(self.M.coefs, model.coefficients() if len(self.M.coefs) else {})
+        self.coefs = np.asarray(values, np.float32)
+        self.coef = ti.ndarray(ti.f32, len(values))
+        self.coef.from_numpy(self.coefs)
+        self.fr = np.zeros(self.M.scalars.count, np.float32)
+        self.out = np.zeros(engine.MAX_RESULTS)
+        self.record = LaunchRecord(2)  # the launches' (unused) record
+        self.records: dict[str, LaunchRecord] = {}  # each solve's per-update coefficients in, residuals out
+        self.nw = min(cpu_threads(), MAX_WORKERS)
+        self.lock = Scratch.get().lock  # the engine's scratch is one per process (Model.step holds it)
+        self.frame: np.ndarray = np.zeros((H, W), np.float32)
+        self.reset()
+
+    def reset(self) -> None:
+        """Every plane to 0, or to its declared initial value; the pairs' parity to 0."""
+        self.x.fill(0.0)
+        for name, coef in self.M.initial.items():
+            plane = getattr(self.M.planes, name)
+            value = float(self.coefs[getattr(self.M.coefs, coef).slot])
+            self._fill(plane.slot, plane.slot + plane.buffers, value)
+        self.parity = 0
+
+    def _fill(self, k0: int, k1: int, value: float) -> None:
+        x = self.x.to_numpy()
+        x[k0:k1] = value
+        self.x.from_numpy(x)
+
+    def flip(self) -> None:
+        """Swap the buffers of every pair: ``now`` becomes ``before``."""
+        self.parity = 1 - self.parity
+
+    def load(self, grey: np.ndarray, first: bool) -> None:
+        """Keep the frame (H, W; uint8, or float in [0, 1]) as the input of the next launches."""
+        self.frame = grey
+
+    def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> None:
+        """Keep an event bin (``p_on``, ``p_off``: (H, W) each) as the input of the next launches."""
+        self.frame = event_bin(p_on, p_off)
+
+    def _kernel(self, name: str, values: dict) -> tuple[Any, Any]:
+        for k, v in values.items():
+            self.fr[getattr(self.M.scalars, k).slot] = v
+        launch = self.M.launches[name]
+        return launch, self.M.engine.kernel(launch, self.lane, self.shape[1] if self.lane else 0, self.modes,
+                                              self.options)
+
+    def _run(self, run: Any, record: LaunchRecord, *part: Any) -> None:
+        run(self.x, self.coef, self.fr, self.frame, self.parity, self.nw, self.out, record.array, *part)
+
+    def launch(self, name: str, **values: float) -> tuple[float, ...]:
+        """Set the launch scalars ``values`` (by name; the others keep their last values), run the launch
+        ``name`` and return its results in the order its stages declare them."""
+        launch, run = self._kernel(name, values)
+        self._run(run, self.record, *(() if self.lane else ("all", 0)))
+        return tuple(float(v) for v in self.out[:len(launch.results)])
+
+    def solve(self, name: str, coefs: Sequence[tuple[float, ...]], updates: int, tol: float, grow: float,
+              **values: float) -> tuple[list[tuple[float, ...]], tuple[float, ...]]:
+        """Run the solve launch ``name``: at most ``updates`` (<= ``len(coefs)``) updates, update ``j`` with its
+        record coefficients ``coefs[j]`` (``a.record(0)``, ``a.record(1)``), stopping once every residual is
+        ``<= tol`` or one grows past ``grow`` times the best. Returns the residuals of the updates run and
+        the launch's results (its ``stages`` run only when the solve converged)."""
+        launch, run = self._kernel(name, dict(values, updates=updates, tol=tol, grow=grow))
+        record = self.records.setdefault(name, LaunchRecord(launch.fields))
+        record.start(coefs)
+        if self.lane:
+            self._run(run, record)
+        else:  # one launch per update, gated here as the scheduler gates them
+            self._run(run, record, "before", 0)
+            best = np.inf
+            for j in range(min(updates, len(coefs))):
+                self._run(run, record, "update", j)
+                r = float(record.array[j, 2:2 + launch.fields].max())
+                if r <= tol or r > grow * best:
+                    break
+                best = min(best, r)
+            done = record.residuals(updates)
+            if done and max(done[-1]) <= tol:
+                self._run(run, record, "after", 0)
+        return record.residuals(updates), tuple(float(v) for v in self.out[:len(launch.results)])
+
+    def fields(self) -> dict[str, np.ndarray]:
+        """Every plane (a pair's ``now`` buffer) of the last frame, (H, W) each, by name; not the scratch
+        planes (named ``_...``)."""
+        x = self.x.to_numpy()
+        if self.lane:
+            n, (H, W) = lanes(), self.shape
+            x = x.reshape(x.shape[0], H, -1)[:, :, n:n + W]
+        return {p.name: np.ascontiguousarray(x[p.slot + (self.parity if p.buffers == 2 else 0)])
+                for p in self.M.planes if not p.name.startswith("_")}

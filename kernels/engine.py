@@ -1,0 +1,612 @@
+"""The engine core: a model's stages, written once, compiled for the lane layout and the pixel layout.
+
+A model's kernel module declares its names once and writes each stage once:
+
+* :class:`Planes` -- the state planes, by name (``"L P:2 ON:2 S"``; ``:2`` a ping-pong pair whose
+  ``now`` buffer is the backend's parity). Every plane lives in one stacked float32 array.
+* :class:`Coefs` -- the coefficients by name and size (``Coefs(k_on=6, a1=1)``), filled once per
+  backend from the model's ``coefficients()`` by name (:func:`coefficient_array`).
+* :class:`Scalars` -- the launch's scalars by name (``Scalars("scale active")``), set per launch.
+* :class:`Stage` and :class:`Launch` -- a stage is a ``ti.func stage(a)`` on one *cell* ``a`` (a lane
+  vector of columns, or one pixel): it reads ``a.at(PLANE, di, dj)``, writes ``a.put(PLANE, v)`` and
+  returns what it reduces (declared by name: ``Stage(fn, sums="sum_G")`` or ``maxes=``).
+
+The accessor's methods are the whole vocabulary of a stage: ``at``, ``put``, ``window3`` (centre, edge
+and diagonal sums of a 3x3 window), ``coef``, ``value`` (a launch scalar), ``grey`` / ``event`` (the
+input), ``result`` (an earlier stage's reduction in this launch), ``zeros``. Borders are engine
+options per plane (:func:`borders`): replicate, reflect-101 or zero outside, and the zero ring
+(the outermost ring set to 0 on every write).
+
+``build(ti, lanes).kernel(launch, lane, borders)`` compiles a launch for one layout: ``lane=True``
+runs its stages on the scheduler's persistent workers over lane arrays (vectors of ``lanes``
+columns with ghost columns, explicit vector types: the fast CPU path); ``lane=False`` runs one
+parallel loop per stage over the pixels of (planes, H, W) arrays (GPUs, narrow frames).
+"""
+
+import functools
+from types import SimpleNamespace
+
+from ..taichi_runtime import scalar_kernel, vector_kernel
+from . import common, compat, schedule
+from .common import BORDER_CODES, REFLECT, REPLICATE, ZERO, context
+from .schedule import Plan
+
+#: Reductions of one launch, at most (the engine's float64 results, one set per process).
+MAX_RESULTS = 8
+#: The lowest value a ``maxes`` result starts from.
+LOWEST = -3.0e38
+
+
+class Plane:
+    """A named plane of a model's state: ``slot`` in the stacked array; ``buffers`` 2 for a ping-pong pair,
+    whose ``now`` (the backend's parity) and ``before`` buffers are :attr:`now` and :attr:`before`."""
+
+    def __init__(self, name: str, slot: int, buffers: int = 1, side: int = 0):
+        self.name, self.slot, self.buffers, self.side = name, slot, buffers, side
+
+    @property
+    def now(self) -> "Plane":
+        return self if self.buffers == 1 else Plane(self.name, self.slot, 2, 0)
+
+    @property
+    def before(self) -> "Plane":
+        if self.buffers == 1:
+            raise ValueError(f"plane {self.name} has one buffer")
+        return Plane(self.name, self.slot, 2, 1)
+
+
+class _Names:
+    """Declared names: attributes, iteration in order, ``len``."""
+
+    def __init__(self, items: dict):
+        self._items = items
+        for k, v in items.items():
+            setattr(self, k, v)
+
+    def __iter__(self):
+        return iter(self._items.values())
+
+    def __len__(self):
+        return len(self._items)
+
+    def names(self) -> list[str]:
+        return list(self._items)
+
+
+class Planes(_Names):
+    """The state planes of a model, by name: ``Planes("L P:2 S")`` (``:2``: a ping-pong pair)."""
+
+    def __init__(self, spec: str):
+        items, slot = {}, 0
+        for word in spec.split():
+            name, _, n = word.partition(":")
+            items[name] = Plane(name, slot, int(n or 1))
+            slot += items[name].buffers
+        super().__init__(items)
+        self.count = slot
+
+
+class Coef:
+    """A named coefficient of ``size`` values at ``slot`` of the coefficient array."""
+
+    def __init__(self, name: str, slot: int, size: int):
+        self.name, self.slot, self.size = name, slot, size
+
+
+class Coefs(_Names):
+    """The coefficients of a model by name and size: ``Coefs(k_on=6, a1=1)``; size 0 (last only): any length."""
+
+    def __init__(self, **sizes: int):
+        items, slot = {}, 0
+        for name, size in sizes.items():
+            items[name] = Coef(name, slot, int(size))
+            slot += int(size)
+        super().__init__(items)
+        self.count = max(slot, 1)
+
+
+class Scalars(_Names):
+    """The scalars of a model's launches by name (``Scalars("scale active")``), set per launch."""
+
+    def __init__(self, spec: str):
+        super().__init__({name: Coef(name, k, 1) for k, name in enumerate(spec.split())})
+        self.count = max(len(self._items), 1)
+
+
+def coefficient_array(coefs: Coefs, values: dict) -> "list[float]":
+    """The coefficient array (float values, in slot order) of ``values``: one entry per declared name, a
+    sequence of its size or a number. Raises ValueError on a missing, unknown or wrongly sized name."""
+    unknown = sorted(set(values) - set(coefs.names()))
+    missing = sorted(set(coefs.names()) - set(values))
+    if unknown or missing:
+        raise ValueError(f"coefficients: unknown {unknown}, missing {missing}")
+    out = []
+    for c in coefs:
+        v = values[c.name]
+        v = list(v) if hasattr(v, "__len__") else [v]
+        if len(v) != c.size and not (c.size == 0 and c is list(coefs)[-1]):  # size 0, last: any length
+            raise ValueError(f"coefficient {c.name}: {c.size} values, got {len(v)}")
+        out += [float(x) for x in v]
+    return out or [0.0]
+
+
+class Stage:
+    """A stage: ``fn(a)`` on every cell, then the reductions of what it returns (``sums``/``maxes``: the
+    names of its results, in the order it returns them; one kind per stage), the ghost columns of the
+    planes in ``ghosts`` refreshed after each row (lane layout; ``halo`` columns). An update stage of a
+    solve returns ``residuals`` (1 or 2) values instead, maxed per update (:class:`Launch`)."""
+
+    def __init__(self, fn, sums: str = "", maxes: str = "", ghosts=(), halo: "int | str" = 1, residuals: int = 0):
+        if sums and maxes:
+            raise ValueError("a stage reduces by one kind (sums or maxes)")
+        if residuals and (sums or maxes or residuals > 2):
+            raise ValueError("an update stage returns its 1 or 2 residuals only")
+        self.fn, self.ghosts, self.halo, self.residuals = fn, tuple(ghosts), halo, int(residuals)
+        self.results = tuple((sums or maxes).split())
+        self.kind = "max" if maxes else "sum"
+        if len(self.results) > 2:
+            raise ValueError("a stage returns at most two results")
+
+
+class Launch:
+    """A launch: its stages one after another (a barrier between two), its results named by its stages.
+
+    A solve also has ``update`` stages (at most 2): after the ``before`` stages, up to ``updates`` updates
+    run while the residuals they return stay above ``tol`` and do not grow past ``grow`` times the best
+    (those three are launch scalars of ``scalars``), then ``stages`` run if the solve converged. An update
+    reads its index as ``a.step`` and its row of the launch record as ``a.record(k)``."""
+
+    def __init__(self, name: str, *stages: Stage, update=(), before=(), scalars: "Scalars | None" = None):
+        self.name, self.stages = name, tuple(stages)
+        self.update, self.before = tuple(update), tuple(before)
+        self.fields = max((s.residuals for s in self.update), default=0)
+        self.controls = None
+        if self.update:
+            if scalars is None or not all(hasattr(scalars, n) for n in ("updates", "tol", "grow")):
+                raise ValueError(f"{name}: a solve needs the launch scalars updates, tol, grow")
+            self.controls = (scalars.updates.slot, scalars.tol.slot, scalars.grow.slot)
+        stages = self.before + self.stages
+        self.results = tuple(r for s in stages for r in s.results)
+        if len(self.results) > MAX_RESULTS:
+            raise ValueError(f"{name}: at most {MAX_RESULTS} results")
+        self.kinds = tuple(s.kind for s in stages for _ in s.results)
+        self.starts = tuple(0.0 if kind == "sum" else LOWEST for kind in self.kinds)
+
+    def slot(self, result: str) -> int:
+        return self.results.index(result)
+
+
+class Layout:
+    """The compile-time choices of a launch's kernel: lane layout or not, frame width (lanes), the border
+    of every plane (``modes``: slot -> (mode, ring)), the model's compile-time options (``options``:
+    ``(name, value)`` pairs, e.g. a stencil's radius), the launch."""
+
+    def __init__(self, launch: Launch, lane: bool, W: int, modes: tuple, options: tuple = ()):
+        self.launch, self.lane, self.W, self.modes, self.options = launch, lane, W, dict(modes), dict(options)
+
+    def halo(self, stage: "Stage") -> int:
+        """The ghost columns ``stage`` refreshes: its ``halo``, a number or the name of an option."""
+        return self.options[stage.halo] if isinstance(stage.halo, str) else stage.halo
+
+    def border(self, plane: Plane) -> tuple[int, bool]:
+        return self.modes.get(plane.slot, (REPLICATE, False))
+
+
+def borders(planes: Planes, spec: dict) -> tuple:
+    """The border options ``spec`` (plane name -> ``"replicate"``, ``"reflect"`` (reflect-101), ``"zero"``,
+    each optionally with ``"+ring"``: the outermost ring set to 0 on every write) as a hashable tuple."""
+    out = []
+    for name, mode in sorted(spec.items()):
+        base, _, ring = mode.partition("+")
+        if base not in BORDER_CODES or ring not in ("", "ring") or not hasattr(planes, name):
+            raise ValueError(f"border of {name}: {mode!r}")
+        out.append((getattr(planes, name).slot, (BORDER_CODES[base], ring == "ring")))
+    return tuple(out)
+
+
+@functools.lru_cache(maxsize=None)
+def build(ti, lanes: int) -> SimpleNamespace:
+    """The engine for the DSL module ``ti`` and ``lanes`` lanes per vector: :func:`kernel` and the cells."""
+    LANES = lanes
+    C = common.build(ti, lanes)
+    run_max = compat.build(ti, lanes).run_max
+    sched = schedule.build(ti, lanes)
+    workers = sched.workers
+    res = ti.field(ti.f64, MAX_RESULTS)  # a launch's reductions
+    F1 = C.COEFS
+    D1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
+    Ctx = context("EngineCtx", "x coef fr frame c nw spec rec")
+    F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
+
+    @ti.func
+    def _index(c, plane: ti.template()):
+        """The slot of ``plane`` (a pair's buffer by the parity ``c``)."""
+        k = plane.slot
+        if ti.static(plane.buffers == 2 and plane.side == 0):
+            k = plane.slot + c
+        elif ti.static(plane.buffers == 2):
+            k = plane.slot + 1 - c
+        return k
+
+    @ti.func
+    def _rows(i, H, mode: ti.template()):
+        """The rows above and below ``i``, mapped by the border ``mode`` (zero: clamped, weighed by the caller)."""
+        im, ip = ti.max(i - 1, 0), ti.min(i + 1, H - 1)
+        if ti.static(mode == REFLECT):
+            im, ip = ti.select(i == 0, 1, i - 1), ti.select(i == H - 1, H - 2, i + 1)
+        return im, ip
+
+    # -- the lane layout: element (k, i, e) holds the columns (e - 1) LANES .. e LANES - 1 of row i -------
+    @ti.func
+    def _lane_at(x: ti.template(), k, i, e, mode: ti.template(), di: ti.template(), dj: ti.template()):
+        r = i
+        if ti.static(di != 0):
+            r = C.border_index(i + di, x.shape[1], mode)
+        v = x[k, r, e]
+        if ti.static(dj != 0):
+            v = C.lane_shift(x[k, r, e - 1], x[k, r, e], x[k, r, e + 1], dj)
+        if ti.static(mode == ZERO and di != 0):
+            v = v * C.border_weight(i + di, x.shape[1], mode)
+        return v
+
+    @ti.func
+    def _lane_window3(x: ti.template(), k, i, e, mode: ti.template()):
+        im, ip = _rows(i, x.shape[1], mode)
+        return C.lane_edge_diag(x, k, im, i, ip, e)
+
+    @ti.func
+    def _lane_put(x: ti.template(), k, i, e, v, ring: ti.template(), W: ti.template()):
+        if ti.static(ring):
+            v = v * _lane_inside(i, e, x.shape[1], W)
+        x[k, i, e] = v
+
+    @ti.func
+    def _lane_inside(i, e, H, W: ti.template()):
+        """1.0 on the lanes of element ``(i, e)`` off the frame's outermost ring, else 0.0."""
+        m = ti.Vector([0.0] * LANES, dt=ti.f32)
+        row = (i > 0) & (i < H - 1)
+        for q in ti.static(range(LANES)):
+            col = (e - 1) * LANES + q
+            m[q] = ti.select(row & (col >= 1) & (col <= W - 2), 1.0, 0.0)
+        return m
+
+    @ti.func
+    def _lane_input(frame: ti.template(), i, e, plane: ti.template(), W: ti.template()):
+        """The input's columns of element ``(i, e)`` (plane ``plane`` of an event bin; past W - 1: the last)."""
+        g = ti.Vector([0.0] * LANES, dt=ti.f32)
+        for q in ti.static(range(LANES)):
+            jj = ti.min((e - 1) * LANES + q, W - 1)
+            if ti.static(len(frame.shape) == 3):
+                g[q] = ti.cast(frame[plane, i, jj], ti.f32)
+            else:
+                g[q] = ti.cast(frame[i, jj], ti.f32)
+        return g
+
+    @ti.func
+    def _lane_zeros():
+        return ti.Vector([0.0] * LANES, dt=ti.f32)
+
+    @ti.func
+    def _pixel_zeros():
+        return ti.f32(0.0)
+
+    @ti.func
+    def _read(array: ti.template(), k: ti.template()):
+        """``array[k]`` (a coefficient, a launch scalar, a result)."""
+        return array[k]
+
+    @ti.func
+    def _read2(array: ti.template(), j, k: ti.template()):
+        """``array[j, k]`` (a launch record's entry)."""
+        return array[j, k]
+
+    # -- the pixel layout: (planes, H, W) arrays, one pixel per cell ---------------------------------
+    @ti.func
+    def _pixel_at(x: ti.template(), k, i, j, mode: ti.template(), di: ti.template(), dj: ti.template()):
+        H, W = x.shape[1], x.shape[2]
+        r, s = i, j
+        if ti.static(di != 0):
+            r = C.border_index(i + di, H, mode)
+        if ti.static(dj != 0):
+            s = C.border_index(j + dj, W, mode)
+        v = x[k, r, s]
+        if ti.static(mode == ZERO and (di != 0 or dj != 0)):
+            v = v * C.border_weight(i + di, H, mode) * C.border_weight(j + dj, W, mode)
+        return v
+
+    @ti.func
+    def _pixel_window3(x: ti.template(), k, i, j, mode: ti.template()):
+        v = _pixel_at(x, k, i, j, mode, -1, 0) + _pixel_at(x, k, i, j, mode, 1, 0)
+        edge = v + _pixel_at(x, k, i, j, mode, 0, -1) + _pixel_at(x, k, i, j, mode, 0, 1)
+        diag = (_pixel_at(x, k, i, j, mode, -1, -1) + _pixel_at(x, k, i, j, mode, 1, -1)) + (
+            _pixel_at(x, k, i, j, mode, -1, 1) + _pixel_at(x, k, i, j, mode, 1, 1))
+        return _pixel_at(x, k, i, j, mode, 0, 0), edge, diag
+
+    @ti.func
+    def _pixel_put(x: ti.template(), k, i, j, v, ring: ti.template()):
+        if ti.static(ring):
+            H, W = x.shape[1], x.shape[2]
+            v = v * ti.select((i > 0) & (i < H - 1) & (j > 0) & (j < W - 1), 1.0, 0.0)
+        x[k, i, j] = v
+
+    @ti.func
+    def _pixel_input(frame: ti.template(), i, j, plane: ti.template()):
+        g = ti.f32(0.0)
+        if ti.static(len(frame.shape) == 3):
+            g = ti.cast(frame[plane, i, j], ti.f32)
+        else:
+            g = ti.cast(frame[i, j], ti.f32)
+        return g
+
+    def _dsl(method):
+        """Mark an accessor method as part of the DSL: both compilers call it while they build a stage (it emits
+        the stage's loads and stores) and warn about any plain Python function they call but these."""
+        method._is_taichi_function = method._is_quadrants_function = False
+        return method
+
+    class Cell:
+        """What a stage sees of one cell: a lane vector of columns (element ``j``) or one pixel (column
+        ``j``) of row ``i``. Its methods are the stages' vocabulary (module docstring). Its members are
+        the launch's arrays, the pairs' parity, the position, the first result and the update; the
+        compile-time choices (:class:`Layout`) are its class's ``spec``, not a member."""
+
+        __slots__ = ("x", "coefs", "fr", "frame", "rec", "c", "i", "j", "got", "step")
+        spec: Layout
+        _is_taichi_function = _is_quadrants_function = False  # made while a stage compiles (see _dsl)
+
+        def __init__(self, ctx, i, j, got=(), step=0):
+            self.x, self.coefs, self.fr, self.frame, self.rec = ctx.x, ctx.coef, ctx.fr, ctx.frame, ctx.rec
+            self.c = ctx.c
+            self.i, self.j, self.got = i, j, got  # got: the first result, read once per chunk of rows
+            self.step = step  # the update of a solve
+
+        @property
+        def lane(self) -> bool:
+            return self.spec.lane
+
+        @property
+        def events(self) -> bool:
+            """Whether the launch's input is an event bin (2, H, W) of ``(p_on, p_off)``."""
+            return len(self.frame.shape) == 3
+
+        def _k(self, plane):
+            return _index(self.c, plane)
+
+        @_dsl
+        def at(self, plane, di=0, dj=0):
+            """``plane`` at row offset ``di`` and column offset ``dj`` (its border outside the frame)."""
+            mode = self.spec.border(plane)[0]
+            return (_lane_at if self.lane else _pixel_at)(self.x, self._k(plane), self.i, self.j, mode, di, dj)
+
+        @_dsl
+        def window3(self, plane):
+            """``(centre, edge sum, diagonal sum)`` of the 3x3 window of ``plane``."""
+            mode = self.spec.border(plane)[0]
+            return (_lane_window3 if self.lane else _pixel_window3)(self.x, self._k(plane), self.i, self.j, mode)
+
+        @_dsl
+        def put(self, plane, value):
+            """Write ``value`` to ``plane`` here (0 on the outermost ring of a plane with the zero ring)."""
+            ring = self.spec.border(plane)[1]
+            if self.lane:
+                _lane_put(self.x, self._k(plane), self.i, self.j, value, ring, self.spec.W)
+            else:
+                _pixel_put(self.x, self._k(plane), self.i, self.j, value, ring)
+
+        @_dsl
+        def coef(self, c, k=0):
+            """Value ``k`` of the coefficient ``c``."""
+            return _read(self.coefs, c.slot + k)
+
+        @_dsl
+        def value(self, s):
+            """The launch scalar ``s``."""
+            return _read(self.fr, s.slot)
+
+        @_dsl
+        def option(self, name: str):
+            """The model's compile-time option ``name`` (a Python value: use it in ``ti.static``)."""
+            return self.spec.options[name]
+
+        @_dsl
+        def grey(self):
+            """The input frame here (float32, as stored: grey levels or [0, 1])."""
+            return self.event(0)
+
+        @_dsl
+        def event(self, polarity: int):
+            """Plane ``polarity`` (0: ON, 1: OFF) of an event bin here."""
+            if self.lane:
+                return _lane_input(self.frame, self.i, self.j, polarity, self.spec.W)
+            return _pixel_input(self.frame, self.i, self.j, polarity)
+
+        @_dsl
+        def record(self, k: int):
+            """Column ``k`` of this update's row of the launch record (a solve's per-update coefficients)."""
+            return _read2(self.rec, self.step, k)
+
+        @_dsl
+        def result(self, name: str):
+            """An earlier stage's reduction ``name`` in this launch (float64)."""
+            k = self.spec.launch.slot(name)
+            return self.got[k] if k < len(self.got) else _read(res, k)
+
+        @_dsl
+        def zeros(self):
+            """A zero value of the cell's type."""
+            return _lane_zeros() if self.lane else _pixel_zeros()
+
+    def _cell_class(spec: Layout):
+        """The cells of one kernel: :class:`Cell` with that kernel's compile-time choices."""
+        return type("Cell", (Cell,), {"__slots__": (), "spec": spec})
+
+    # -- the row iterator: a stage on rows [i0, i1), reduced -----------------------------------------
+    @ti.func
+    def _reduce_lane(v, e, W: ti.template(), kind: ti.template()):
+        r = ti.f64(0.0)
+        if ti.static(kind == "max"):
+            r = ti.cast(run_max(v * C.lane_mask(e, W), LANES), ti.f64)
+        else:
+            r = ti.cast((v * C.lane_mask(e, W)).sum(), ti.f64)
+        return r
+
+    @ti.func
+    def _combine(acc, r, kind: ti.template()):
+        out = acc + r
+        if ti.static(kind == "max"):
+            out = ti.max(acc, r)
+        return out
+
+    @ti.func
+    def _publish(slot: ti.template(), acc, kind: ti.template()):
+        if ti.static(kind == "max"):
+            ti.atomic_max(res[slot], acc)
+        else:
+            ti.atomic_add(res[slot], acc)
+
+    def _row_stage(stage: Stage):
+        """The scheduler's stage ``run(ctx, i0, i1, j)`` of ``stage`` on the lane layout."""
+        n, kind = len(stage.results), stage.kind
+
+        @ti.func
+        def run(ctx: ti.template(), i0, i1, j):
+            W = ti.static(ctx.spec.W)
+            start = ti.static(0.0 if kind == "sum" else LOWEST)
+            a0, a1 = ti.f64(start), ti.f64(start)
+            m0, m1 = ti.f32(0.0), ti.f32(0.0)
+            p0 = _read(res, 0)  # the earlier stages' first result, final in this phase
+            for i in range(i0, i1):
+                for e in range(1, (LANES + W - 1) // LANES + 1):
+                    if ti.static(stage.residuals == 1):
+                        r = stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j))
+                        m0 = ti.max(m0, run_max(r * C.lane_mask(e, W), LANES))
+                    elif ti.static(stage.residuals == 2):
+                        q0, q1 = stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j))
+                        m0 = ti.max(m0, run_max(q0 * C.lane_mask(e, W), LANES))
+                        m1 = ti.max(m1, run_max(q1 * C.lane_mask(e, W), LANES))
+                    elif ti.static(n == 0):
+                        stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j))
+                    elif ti.static(n == 1):
+                        a0 = _combine(a0, _reduce_lane(stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j)), e, W, kind), kind)
+                    else:
+                        r0, r1 = stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j))
+                        a0 = _combine(a0, _reduce_lane(r0, e, W, kind), kind)
+                        a1 = _combine(a1, _reduce_lane(r1, e, W, kind), kind)
+                for g in ti.static(stage.ghosts):
+                    C.fill_ghosts(ctx.x, _index(ctx.c, g), i, 1, 1, W, ti.static(ctx.spec.halo(stage)),
+                                  ti.static(ctx.spec.border(g)[0]))
+            if ti.static(stage.residuals >= 1):
+                ti.atomic_max(sched.rbuf[j, 0], m0)
+            if ti.static(stage.residuals == 2):
+                ti.atomic_max(sched.rbuf[j, 1], m1)
+            if ti.static(n >= 1):
+                _publish(ti.static(ctx.spec.launch.slot(stage.results[0])), a0, kind)
+            if ti.static(n == 2):
+                _publish(ti.static(ctx.spec.launch.slot(stage.results[1])), a1, kind)
+
+        return run
+
+    @ti.func
+    def _pixel_stage(ctx: ti.template(), stage: ti.template(), step):
+        """One parallel loop of ``stage`` over the pixels (the pixel layout); an update's residuals are
+        maxed into the launch record's row ``step`` (columns 2..)."""
+        n = ti.static(len(stage.results))
+        for i, j in ti.ndrange(ctx.x.shape[1], ctx.x.shape[2]):
+            if ti.static(stage.residuals == 1):
+                ti.atomic_max(ctx.rec[step, 2], stage.fn(ctx.spec.cell(ctx, i, j, (), step)))
+            elif ti.static(stage.residuals == 2):
+                q0, q1 = stage.fn(ctx.spec.cell(ctx, i, j, (), step))
+                ti.atomic_max(ctx.rec[step, 2], q0)
+                ti.atomic_max(ctx.rec[step, 3], q1)
+            elif ti.static(n == 0):
+                stage.fn(ctx.spec.cell(ctx, i, j))
+            elif ti.static(n == 1):
+                _publish(ti.static(ctx.spec.launch.slot(stage.results[0])), ti.cast(stage.fn(ctx.spec.cell(ctx, i, j)),
+                                                                                   ti.f64), stage.kind)
+            else:
+                r0, r1 = stage.fn(ctx.spec.cell(ctx, i, j))
+                _publish(ti.static(ctx.spec.launch.slot(stage.results[0])), ti.cast(r0, ti.f64), stage.kind)
+                _publish(ti.static(ctx.spec.launch.slot(stage.results[1])), ti.cast(r1, ti.f64), stage.kind)
+
+    @ti.func
+    def _controls(ctx: ti.template()):
+        return ctx.nw, ctx.x.shape[1], 0, 0.0, 0.0
+
+    @ti.func
+    def _start(spec: ti.template()):
+        for k in ti.static(range(len(spec.launch.results))):
+            res[k] = spec.launch.starts[k]
+
+    @ti.func
+    def _finish(spec: ti.template(), out: ti.template()):
+        for k in ti.static(range(len(spec.launch.results))):
+            out[k] = res[k]
+
+    def _controls_of(launch: Launch):
+        """The scheduler's controls of ``launch``: workers, rows and, for a solve, its launch scalars."""
+        if launch.controls is None:
+            return _controls
+        n_at, tol_at, grow_at = launch.controls
+
+        @ti.func
+        def controls(ctx: ti.template()):
+            fr = ti.static(ctx.fr)
+            return ctx.nw, ctx.x.shape[1], ti.cast(fr[n_at], ti.i32), fr[tol_at], fr[grow_at]
+
+        return controls
+
+    @ti.func
+    def _residuals(spec: ti.template(), rec: ti.template()):
+        if ti.static(spec.launch.fields > 0):
+            sched.residuals_to(rec, spec.launch.fields)
+
+    @functools.lru_cache(maxsize=None)
+    def kernel(launch: Launch, lane: bool, W: int, modes: tuple, options: tuple = ()):
+        """The kernel of ``launch`` for one layout: ``run(x, coef, fr, frame, c, nw, out, rec)`` (``x``: the
+        stacked planes, lane array or (planes, H, W); ``frame``: the input, (H, W) or an event bin (2, H, W);
+        ``c``: the pairs' parity; ``nw``: workers (lane layout); ``out``: the results, float64; ``rec``: the
+        launch record of a solve, :class:`~cdnf_ti.kernels.common.LaunchRecord`).
+
+        The pixel layout's kernel takes two more arguments, ``part`` (``"all"``, or ``"before"``, ``"update"``,
+        ``"after"``: the stages it runs) and ``step`` (the update): the backend runs a solve's updates one
+        launch each."""
+        spec = Layout(launch, lane, W, modes, options)
+        spec.cell = _cell_class(spec)
+        if lane:
+            run_plan = workers(Plan(before=tuple(_row_stage(s) for s in launch.before),
+                                    update=tuple(_row_stage(s) for s in launch.update),
+                                    after=tuple(_row_stage(s) for s in launch.stages), controls=_controls_of(launch)))
+
+            @ti.kernel
+            def run_lanes(x: C.LANE3, coef: F1, fr: F1, frame: ti.types.ndarray(), c: ti.i32, nw: ti.i32,
+                          out: D1, rec: F2):
+                _start(spec)
+                run_plan(ti.static(Ctx(x, coef, fr, frame, c, nw, spec, rec)))
+                _finish(spec, out)
+                _residuals(spec, rec)
+
+            return vector_kernel(run_lanes)
+
+        @ti.kernel
+        def run_pixels(x: C.F3, coef: F1, fr: F1, frame: ti.types.ndarray(), c: ti.i32, nw: ti.i32, out: D1,
+                       rec: F2, part: ti.template(), step: ti.i32):
+            if ti.static(part in ("all", "before")):
+                _start(spec)
+            for s in ti.static({"all": launch.before + launch.stages, "before": launch.before,
+                                "update": launch.update, "after": launch.stages}[part]):
+                _pixel_stage(ti.static(Ctx(x, coef, fr, frame, c, nw, spec, rec)), s, step)
+            _finish(spec, out)
+
+        return scalar_kernel(run_pixels)
+
+    return SimpleNamespace(kernel=kernel, Cell=Cell, res=res, LANES=LANES, REPLICATE=REPLICATE, REFLECT=REFLECT,
+                           ZERO=ZERO)
+
+
+def model(planes: Planes, coefs: Coefs, scalars: Scalars, engine_ns: SimpleNamespace, *launches: Launch,
+          initial: dict | None = None) -> SimpleNamespace:
+    """What a model's kernel module's ``build`` returns: its declarations, its launches by name, the engine
+    (``engine_ns``: :func:`build`'s namespace) and the planes' values at reset (``initial``: plane name ->
+    a coefficient name, whose first value fills the plane; others: 0)."""
+    return SimpleNamespace(planes=planes, coefs=coefs, scalars=scalars, engine=engine_ns,
+                           launches={launch.name: launch for launch in launches}, initial=dict(initial or {}))
