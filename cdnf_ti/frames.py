@@ -356,7 +356,7 @@ def open_source(path: str | os.PathLike, fps: float | None = None, color_order: 
         raise InputError(path, "file is empty")
     if is_event_file(p):
         raise InputError(path, "is an event-camera recording, not frames: 'python -m cdnf_ti.run FILE' runs the "
-                               "models on it (README, 'Event cameras'); 'python -m cdnf_ti.run events --info' "
+                               "models on it (docs/EVENTS.md); 'python -m cdnf_ti.run events --info' "
                                "summarises it")
     if p.suffix.lower() == ".npy":
         return open_npy(p, fps, color_order)

@@ -1,7 +1,7 @@
 """Size limits checked before any work, so that an impossible request fails at once with one line
 instead of a MemoryError (or hours of swapping) later.
 
-Limits (see README, "Limits"):
+Limits (see docs/CLI.md, "Limits"):
 
 * frame side at least :data:`MIN_SIDE` px where models run (the widest kernel: a smaller frame
   cannot hold one receptive field, and the models' output on it means nothing), and at most

@@ -11,7 +11,7 @@ finds each field's range over the whole clip (0.5 and 99.5 percentiles of each
 frame, then the extremes of those), so a colour means the same value in every
 frame. Signed fields use a diverging map symmetric about 0.
 
-An event recording (README, "Event cameras") is rendered bin by bin: the model takes each
+An event recording (docs/EVENTS.md) is rendered bin by bin: the model takes each
 bin through its ON/OFF input stage, and the input panel shows the bin's net contrast
 ``P_on - P_off`` on grey, ON events green and OFF events red (:func:`event_panel`).
 

@@ -104,7 +104,7 @@ def _videos_parser() -> argparse.ArgumentParser:
                     f"Subcommands: {', '.join(SUBCOMMANDS)} (e.g. 'python -m cdnf_ti.run demo --help').",
     )
     ap.add_argument("inputs", nargs="+", metavar="VIDEO",
-                    help="video file, folder of images, .npy array, event recording (README, 'Event cameras'), or a "
+                    help="video file, folder of images, .npy array, event recording (docs/EVENTS.md), or a "
                          "generated stimulus "
                          "'stim:NAME[?coherence=C&seed=S&size=N...]' (see cdnf_ti.inputs)")
     add_output_option(ap)

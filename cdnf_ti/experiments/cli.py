@@ -275,7 +275,7 @@ def dataset_main(argv: Sequence[str]) -> int:
                     "them (docs/EVALUATION.md) and write traces, results.csv, summary.md/json and "
                     "figures. Rerunning with the same OUT skips finished work.")
     ap.add_argument("folder", metavar="DIR",
-                    help="folder of videos and/or event recordings (README, 'Event cameras': a recording's frames "
+                    help="folder of videos and/or event recordings (docs/EVENTS.md: a recording's frames "
                          "are its bins of --bin-ms, and its labels count bins)")
     add_output_option(ap, default="cdnf_out/dataset")
     ap.add_argument("--render", action="store_true",
