@@ -452,7 +452,7 @@ def render_video(source: str | Path, model_name: str, out: str | Path, params: A
     is_events = isinstance(src, EventSource)
     if is_events and rain is not None:
         raise InputError(source, "is an event recording; --rain applies to frames only")
-    check_frame_size(*src.shape, n_models=1, what=str(source))
+    check_frame_size(*src.shape, n_models=1, what=str(source), binning=is_events)
     if window is not None:
         last = src.n_frames - 1 if src.n_frames else None
         if not 0 <= window[0] <= window[1] or (last is not None and window[1] > last):

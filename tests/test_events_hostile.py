@@ -222,8 +222,9 @@ def test_a_clip_figure_draws_an_empty_trace_as_no_trace(tmp_path):
 
 
 # -- 5. one size budget ------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("command", [["events", "--info"], ["run", "--no-progress", "--out", "{tmp}/out"]])
-def test_binning_counts_in_the_one_memory_budget_of_info_and_run(command, tmp_path, monkeypatch, capsys):
+@pytest.mark.parametrize("command", [["events", "--info"], ["run", "--no-progress", "--out", "{tmp}/out"],
+                                     ["render", "--no-progress", "--out", "{tmp}/m.avi"]])
+def test_binning_counts_in_the_one_memory_budget_of_info_run_and_render(command, tmp_path, monkeypatch, capsys):
     from cdnf_ti import limits
 
     monkeypatch.setattr(limits, "physical_memory", lambda: 1 << 30)  # half of it, 512 MiB, may be planned
