@@ -599,8 +599,8 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
         return scalar_kernel(run_pixels)
 
-    return SimpleNamespace(kernel=kernel, Cell=Cell, res=res, LANES=LANES, REPLICATE=REPLICATE, REFLECT=REFLECT,
-                           ZERO=ZERO)
+    return SimpleNamespace(ti=ti, kernel=kernel, Cell=Cell, res=res, LANES=LANES, REPLICATE=REPLICATE,
+                           REFLECT=REFLECT, ZERO=ZERO)
 
 
 def model(planes: Planes, coefs: Coefs, scalars: Scalars, engine_ns: SimpleNamespace, *launches: Launch,

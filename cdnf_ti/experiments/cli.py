@@ -52,6 +52,7 @@ from .paramsweep import run_param_sweep
 from .reports import pct, table2_markdown
 from .scoring import Padding
 from .selectivity import agreement_markdown, selectivity_sweep
+from .tune import run_tune
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 
@@ -243,8 +244,6 @@ def _param_sweep(args) -> int:
 
 def _tune(args) -> int:
     """``experiment tune``: checks the options, runs :func:`~.tune.run_tune`, prints tune.md."""
-    from .tune import run_tune
-
     check_model_options(args)
     models = parse_models(args.models)
     if len(models) != 1:

@@ -13,6 +13,7 @@ import ctypes
 import multiprocessing as mp
 import os
 import signal
+import subprocess
 import sys
 import threading
 import time
@@ -339,7 +340,6 @@ def watch_interrupts(grace_s: float = INTERRUPT_GRACE_S) -> bool:
         return True
     if os.name != "posix" or threading.current_thread() is not threading.main_thread():
         return False
-    import subprocess  # lazy: only command-line programs start the watchdog
 
     sig_r, sig_w = os.pipe()
     ack_r, ack_w = os.pipe()
