@@ -10,6 +10,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -37,18 +38,29 @@ def _cli(*args: str, timeout: float | None = None, **kw) -> subprocess.Completed
                           timeout=timeout, env=ENV, **kw)
 
 
+#: Runs the command in argv[2:] as its own child and writes that child's peak resident memory (KiB on
+#: Linux) to the file argv[1]. A small interpreter forks it, so the figure is the command's own: a child
+#: forked straight from a test process that has grown (kernels, frames) starts at that process's size.
+_PEAK_LAUNCHER = (
+    "import os, subprocess, sys\n"
+    "p = subprocess.Popen(sys.argv[2:])\n"
+    "_, status, usage = os.wait4(p.pid, 0)\n"
+    "open(sys.argv[1], 'w').write(str(usage.ru_maxrss))\n"
+    "sys.exit(os.waitstatus_to_exitcode(status))\n"
+)
+
+
 def _cli_and_peak_memory(*args: str) -> tuple[subprocess.CompletedProcess, int | None]:
     """Run the command line in a child; also return its peak resident memory in bytes (None: not measurable here)."""
-    p = subprocess.Popen([sys.executable, "-m", "cdnf_ti.run", *args], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, env=ENV)
+    cmd = [sys.executable, "-m", "cdnf_ti.run", *args]
     if not hasattr(os, "wait4"):
-        out, err = p.communicate()
-        return subprocess.CompletedProcess(p.args, p.returncode, out, err), None
-    out, err = p.stdout.read(), p.stderr.read()  # one short error line each: no pipe fills
-    _, status, usage = os.wait4(p.pid, 0)
-    p.returncode = os.waitstatus_to_exitcode(status)
-    kib = 1 if sys.platform == "darwin" else 1024  # ru_maxrss: bytes on macOS, KiB elsewhere
-    return subprocess.CompletedProcess(p.args, p.returncode, out, err), usage.ru_maxrss * kib
+        return subprocess.run(cmd, capture_output=True, text=True, env=ENV), None
+    with tempfile.TemporaryDirectory() as d:
+        peak_file = Path(d) / "peak"
+        proc = subprocess.run([sys.executable, "-c", _PEAK_LAUNCHER, str(peak_file), *cmd], capture_output=True,
+                              text=True, env=ENV)
+        kib = 1 if sys.platform == "darwin" else 1024  # ru_maxrss: bytes on macOS, KiB elsewhere
+        return proc, int(peak_file.read_text()) * kib
 
 
 def _children(pid: int) -> list[int]:
