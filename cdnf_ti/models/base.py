@@ -274,6 +274,8 @@ class Model:
     output_name: ClassVar[str] = "output"
     params_type: ClassVar[type] = object
     description: ClassVar[str] = ""
+    #: Where ``--models all`` runs the model: by ``order``, then by name (C-DNF 0, Table I's models 1-4).
+    order: ClassVar[int] = 100
     BACKENDS: ClassVar[tuple[str, ...]] = ("taichi", "numpy")
     #: The engine that compiles the kernels and builds a model's ``"taichi"`` backend
     #: (:class:`cdnf_ti.backends.Engine`: ``select_compiler(name)``, ``start(arch)``,

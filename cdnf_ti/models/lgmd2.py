@@ -279,6 +279,7 @@ class LGMD2(LGMDFamily):
     """
 
     name = "lgmd2"
+    order = 2
     panels = (("ON", "ON"), ("OFF", "OFF"), ("S", "Summation S"))
     params_type = LGMD2Params
     description = "LGMD2 (Fu et al. 2020): biased ON/OFF, adaptive inhibition, SFA; equations from the authors' code"

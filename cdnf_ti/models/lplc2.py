@@ -121,6 +121,7 @@ class LPLC2(Model):
     """
 
     name = "lplc2"
+    order = 6
     panels = (("horizontal", "EMD left - right"), ("vertical", "EMD up - down"), ("lplc2", "LPLC2 response"))
     output_name = "V"
     params_type = LPLC2Params

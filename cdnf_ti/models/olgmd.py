@@ -110,6 +110,7 @@ class OLGMD(Model):
     """
 
     name = "olgmd"
+    order = 5
     output_name = "K"
     params_type = OLGMDParams
     description = ("oLGMD (Gao et al. 2024): LGMD2 with polarity-specific feed-forward inhibition; "

@@ -176,6 +176,7 @@ class SDNF(Model):
     """
 
     name = "sdnf"
+    order = 1
     kernels = "sdnf"
     panels = (("E", "Binary input E"), ("u", "Field u"), ("activity", "Firing rate f(u)"))
     #: Use the fast (lane) layout where it applies; ``False``: the pixel layout (same equations).
