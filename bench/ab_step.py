@@ -6,7 +6,7 @@ the CPU time per frame. The table gives each version's median over the rounds an
 ``B / A`` (frames/s: above 1, B is faster; CPU time: above 1, B is slower)::
 
     python bench/ab_step.py --a PYTHON_A:CHECKOUT_A --b PYTHON_B:CHECKOUT_B \\
-        [--models cdnf,lgmd2] [--compiler taichi] [--clip CLIP.mp4] [--size 426x240] \\
+        [--models cdnf,lgmd2 | all] [--compiler taichi] [--clip CLIP.mp4] [--size 426x240] \\
         [--frames 150] [--rounds 5]
 
 ``PYTHON`` is an interpreter in which that checkout's ``cdnf_ti`` is importable (its own venv);
@@ -25,8 +25,8 @@ import sys
 CHILD = r"""
 import json, sys, time
 import numpy as np
-from cdnf_ti import create_model
-model_names, clip = sys.argv[1].split(","), sys.argv[2]
+from cdnf_ti import MODELS, create_model
+model_names, clip = (list(MODELS) if sys.argv[1] == "all" else sys.argv[1].split(",")), sys.argv[2]
 width, height, n = int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5])
 if clip:
     import cv2
@@ -72,7 +72,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--a", required=True, help="PYTHON:CHECKOUT of version A (before)")
     ap.add_argument("--b", required=True, help="PYTHON:CHECKOUT of version B (after)")
-    ap.add_argument("--models", default="cdnf,sdnf,lgmd1,lgmd2,flgmd_onn")
+    ap.add_argument("--models", default="all", help="comma-separated model names, or all (every registered model)")
     ap.add_argument("--compiler", default=None, help="taichi or quadrants (default: the checkouts' default)")
     ap.add_argument("--clip", default=None, help="a video; default: the stand-in video")
     ap.add_argument("--size", default="426x240", help="WxH of the frames")
@@ -84,6 +84,8 @@ def main(argv=None) -> int:
     for r in range(args.rounds):
         for v in (("a", "b") if r % 2 == 0 else ("b", "a")):
             runs[v].append(_run(getattr(args, v), models, args))
+        if models == ["all"]:  # the registered models both versions ran
+            models = [m for m in runs["a"][-1] if m in runs["b"][-1]]
         print(f"round {r + 1}/{args.rounds}: " + "  ".join(
             f"{m} {runs['a'][-1][m]['fps']:.0f}->{runs['b'][-1][m]['fps']:.0f}" for m in models), file=sys.stderr)
     print(f"| model | frames/s A | frames/s B | B/A | CPU ms A | CPU ms B | B/A |  ({args.rounds} rounds, "

@@ -1,20 +1,17 @@
 """How close a model came to alerting: its alert rule, the peak of what the rule compares, and the first alert.
 
-Each model family alerts by its own rule, read here from a finished
-:class:`~cdnf_ti.models.base.Trace` (its output and diagnostic columns) and the model's
-parameters:
+Each model states its own rule (:meth:`cdnf_ti.models.base.Model.alert_rule`, an
+:class:`AlertRule`): the value it compares (a column of its :class:`~cdnf_ti.models.base.Trace`,
+the output or a diagnostic), the level that value must pass and the rule in words. Everything
+that says how close a run came (``run``'s line and summary.csv, ``live``'s ``start`` event)
+reads it from the model, so a new model gets it by stating its rule:
 
-* **a level on the output** (C-DNF, and any model with a fixed ``threshold``): alert while
-  ``I_v > I_thre``, ``I_thre = 0.5 + epsilon`` (0.506 by default; ``0.5 = sigmoid(0)`` is the rest
-  output). The peak is ``max I_v``.
-* **a spike count** (LGMD1, LGMD2, F-LGMD ONn: a ``count`` column and a parameter ``n_ts``):
-  alert while the spike count is at least ``n_ts`` (8). The peak is the largest spike count.
-* **a dynamic threshold held for some frames** (SDNF: ``dyn_threshold`` and ``run`` columns):
-  a frame counts when ``I(t) > max(0.5 + epsilon, I(t-1) + delta)``; alert after ``n_persist``
-  (3) such frames in a row. The peak is the longest such run of frames.
-
-The rule is chosen by what the trace records, so a new model that records the same columns
-gets the same description without a change here.
+* a level on the output (C-DNF, and any model with a fixed ``threshold``; the default):
+  ``I_v > 0.506``, peak ``max I_v``;
+* LGMD1, LGMD2, F-LGMD ONn: ``spike count >= n_ts`` (``count``);
+* SDNF: ``I > max(0.5 + epsilon, I(t-1) + delta)`` on ``n_persist`` frames in a row (``run``);
+* oLGMD: the 4-frame sum of ``exp(4 (K - 0.78)) >= 3`` (``spike_sum``);
+* EMD-LPLC2: the giant fibre's ``V > -50 mV`` in a substep (``V_peak``: V before the spike reset).
 """
 from __future__ import annotations
 
@@ -26,21 +23,68 @@ import numpy as np
 
 
 @dataclass(frozen=True)
-class AlertSummary:
-    """One run's alert rule and how close the model came to it.
+class AlertRule:
+    """A model's alert rule: which value of its trace it compares, and against what.
 
     Attributes
     ----------
     rule : str
         The rule in words, e.g. ``"I_v > 0.506"`` or ``"spike count >= 8"``.
     quantity : str
-        What the rule compares (``"I_v"``, ``"spike count"``, ``"frames in a row above the dynamic threshold"``).
+        What the rule compares, in words (``"I_v"``, ``"spike count"``).
+    column : str
+        The trace column holding it per frame: the output's name or a diagnostic's.
+    level : float
+        The value ``quantity`` must exceed (``strict``) or reach for an alert.
+    strict : bool
+        ``value > level`` alerts; else ``value >= level`` does.
+    """
+
+    rule: str
+    quantity: str
+    column: str
+    level: float
+    strict: bool = False
+
+    def values(self, trace: Any) -> np.ndarray:
+        """``column`` of ``trace`` per frame, shape (T,) (nan where the trace lacks it)."""
+        if self.column == getattr(trace, "output_name", None):
+            return np.asarray(trace.output, dtype=float)
+        if self.column == "spike":
+            return np.asarray(trace.spike, dtype=float)
+        diag = getattr(trace, "diagnostics", {}) or {}
+        if self.column in diag:
+            return np.asarray(diag[self.column], dtype=float)
+        return np.full(int(getattr(trace, "n_frames", 0)), np.nan)
+
+    def peak(self, trace: Any) -> float:
+        """The largest finite value of ``column`` over ``trace`` (nan when there is none)."""
+        v = self.values(trace)
+        v = v[np.isfinite(v)]
+        return float(v.max()) if v.size else float("nan")
+
+    def as_dict(self) -> dict:
+        """``{"rule", "quantity", "column", "level", "strict"}`` (for JSON records)."""
+        return {"rule": self.rule, "quantity": self.quantity, "column": self.column, "level": self.level,
+                "strict": self.strict}
+
+
+@dataclass(frozen=True)
+class AlertSummary:
+    """One run's alert rule and how close the model came to it.
+
+    Attributes
+    ----------
+    rule : str
+        The rule in words (:attr:`AlertRule.rule`).
+    quantity : str
+        What the rule compares (:attr:`AlertRule.quantity`).
     peak : float
         The largest value of ``quantity`` over the run (nan for an empty trace).
     level : float
         The value ``quantity`` must exceed (``strict``) or reach for an alert.
     strict : bool
-        ``peak > level`` alerts (a level on the output); else ``peak >= level`` does.
+        ``peak > level`` alerts; else ``peak >= level`` does.
     first_alert : int or None
         The first frame with an alert (frames from 0).
     first_alert_s : float or None
@@ -72,46 +116,18 @@ def _num(x: float) -> str:
     return f"{int(x)}" if float(x).is_integer() and abs(x) < 1e9 else f"{x:.4f}"
 
 
-def _param(params: Any, name: str, default: Any = None) -> Any:
-    return getattr(params, name, default) if params is not None else default
-
-
-def _peak(values: np.ndarray) -> float:
-    v = np.asarray(values, dtype=float)
-    v = v[np.isfinite(v)]
-    return float(v.max()) if v.size else float("nan")
-
-
-def alert_summary(trace: Any, params: Any = None, fps: float = 30.0) -> AlertSummary:
-    """The alert rule of ``trace``'s model and the peak of what it compares.
+def alert_summary(trace: Any, rule: AlertRule, fps: float = 30.0) -> AlertSummary:
+    """How close ``trace`` came to ``rule`` (its model's :meth:`~cdnf_ti.models.base.Model.alert_rule`).
 
     Parameters
     ----------
     trace : Trace
         A finished run (output, spike and diagnostic columns).
-    params : parameter dataclass, optional
-        The model's parameters (``n_ts``, ``n_persist``, ``epsilon``, ``delta``); the model's
-        defaults where absent.
+    rule : AlertRule
+        The rule of the model that made it.
     fps : float
         Frame rate of the input (frames/s), for the first alert in seconds.
     """
-    diag = getattr(trace, "diagnostics", {}) or {}
     fa = trace.first_alert
     fa_s = None if fa is None or not fps or fps <= 0 else fa / float(fps)
-    name = getattr(trace, "output_name", "output") or "output"
-    if "count" in diag:
-        n_ts = _param(params, "n_ts", 8)
-        return AlertSummary(f"spike count >= {int(n_ts)}", "spike count", _peak(diag["count"]), float(n_ts),
-                            False, fa, fa_s)
-    if "dyn_threshold" in diag and "run" in diag:
-        static = trace.threshold if trace.threshold is not None else 0.5 + float(_param(params, "epsilon", 0.006))
-        delta = float(_param(params, "delta", 0.0))
-        n = int(_param(params, "n_persist", 3))
-        prev = f"{name}(t-1)" + (f" + {delta:g}" if delta else "")
-        return AlertSummary(f"{name} > max({static:.4g}, {prev}) on {n} frames in a row",
-                            "frames in a row above the dynamic threshold", _peak(diag["run"]), float(n), False,
-                            fa, fa_s)
-    if trace.threshold is not None:
-        thr = float(trace.threshold)
-        return AlertSummary(f"{name} > {thr:.4g}", name, _peak(trace.output), thr, True, fa, fa_s)
-    return AlertSummary("spike", "spike", _peak(np.asarray(trace.spike, dtype=float)), 1.0, False, fa, fa_s)
+    return AlertSummary(rule.rule, rule.quantity, rule.peak(trace), float(rule.level), rule.strict, fa, fa_s)

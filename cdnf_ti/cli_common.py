@@ -49,12 +49,12 @@ from pathlib import Path
 from typing import Sequence
 
 from .errors import UserError
-from .events.binning import DEFAULT_BIN_MS, DEFAULT_EVENT_THRESHOLD
+from .events.binning import DEFAULT_BIN_MS, DEFAULT_EVENT_THRESHOLD, DEFAULT_MAX_GAP_S, DEFAULT_MAX_SPAN_S
 from .events.readers import parse_sensor_size
 from .limits import MAX_DROPS
 from .models import MODELS, get_model_class
 from .param_options import model_params
-from .taichi_runtime import COMPILERS, check_arch, select_compiler
+from .taichi_runtime import COMPILERS, check_arch, select_compiler, set_compile_notices
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
@@ -65,6 +65,7 @@ class ArgumentParser(argparse.ArgumentParser):
     (argparse's own ``error`` prints the whole usage block first.) ``--rain`` followed by anything
     but one of its words (``on``, ``off``, ``both`` and the deprecated ones) is the flag: ``--rain
     clip.mp4`` is rain on ``clip.mp4``, not a bad ``--rain`` value (:func:`rain_flag_argv`).
+    ``--no-progress`` also silences the compile notices (:func:`~cdnf_ti.taichi_runtime.set_compile_notices`).
     """
 
     def error(self, message: str) -> None:  # type: ignore[override]
@@ -73,7 +74,10 @@ class ArgumentParser(argparse.ArgumentParser):
     def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
         if args is not None:
             args = rain_flag_argv(list(args))
-        return super().parse_known_args(args, namespace)
+        ns, rest = super().parse_known_args(args, namespace)
+        if getattr(ns, "no_progress", False):
+            set_compile_notices(False)  # --no-progress: no "compiling kernels" lines either (workers inherit it)
+        return ns, rest
 
 
 def note(text: str) -> None:
@@ -123,7 +127,8 @@ def sensor_size_arg(text: str) -> tuple[int, int]:
 
 
 def add_event_options(ap: argparse.ArgumentParser) -> None:
-    """``--sensor-size``, ``--bin-ms``, ``--event-threshold``: how an event recording becomes model input.
+    """``--sensor-size``, ``--bin-ms``, ``--event-threshold``: how an event recording becomes model input;
+    ``--max-gap-s``, ``--max-span-s``: the limits past which a timestamp is taken as corrupt.
 
     Read them back with :func:`event_options_of`.
     """
@@ -136,14 +141,22 @@ def add_event_options(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--event-threshold", type=positive_float, default=DEFAULT_EVENT_THRESHOLD, metavar="C",
                     help="the sensor's log-contrast threshold C: n events at a pixel in a bin give the models a "
                          "contrast min(1, n C) (default: %(default)s); for 'events VIDEO' the emulated threshold")
+    ap.add_argument("--max-gap-s", type=positive_float, default=DEFAULT_MAX_GAP_S, metavar="S",
+                    help="an event more than S seconds after every event before it is a corrupt timestamp, an "
+                         "error (default: %(default)g; raise it for a recording with long pauses)")
+    ap.add_argument("--max-span-s", type=positive_float, default=DEFAULT_MAX_SPAN_S, metavar="S",
+                    help="an event more than S seconds after the recording's start is a corrupt timestamp, an "
+                         "error (default: %(default)g, 24 h)")
 
 
 def event_options_of(args: argparse.Namespace) -> dict:
-    """``{"sensor_size", "bin_ms", "event_threshold"}`` from the options of :func:`add_event_options`
-    (the defaults where the command has none)."""
+    """``{"sensor_size", "bin_ms", "event_threshold", "max_gap_s", "max_span_s"}`` from the options of
+    :func:`add_event_options` (the defaults where the command has none)."""
     return {"sensor_size": getattr(args, "sensor_size", None),
             "bin_ms": float(getattr(args, "bin_ms", DEFAULT_BIN_MS)),
-            "event_threshold": float(getattr(args, "event_threshold", DEFAULT_EVENT_THRESHOLD))}
+            "event_threshold": float(getattr(args, "event_threshold", DEFAULT_EVENT_THRESHOLD)),
+            "max_gap_s": float(getattr(args, "max_gap_s", DEFAULT_MAX_GAP_S)),
+            "max_span_s": float(getattr(args, "max_span_s", DEFAULT_MAX_SPAN_S))}
 
 
 def given_event_options(args: argparse.Namespace) -> list[str]:
@@ -152,7 +165,9 @@ def given_event_options(args: argparse.Namespace) -> list[str]:
     opts = event_options_of(args)
     return [o for o, changed in (("--sensor-size", opts["sensor_size"] is not None),
                                  ("--bin-ms", opts["bin_ms"] != DEFAULT_BIN_MS),
-                                 ("--event-threshold", opts["event_threshold"] != DEFAULT_EVENT_THRESHOLD))
+                                 ("--event-threshold", opts["event_threshold"] != DEFAULT_EVENT_THRESHOLD),
+                                 ("--max-gap-s", opts["max_gap_s"] != DEFAULT_MAX_GAP_S),
+                                 ("--max-span-s", opts["max_span_s"] != DEFAULT_MAX_SPAN_S))
             if changed]
 
 
@@ -180,17 +195,30 @@ def rain_word(text: str) -> str:
 
 
 def rain_flag_argv(argv: list[str]) -> list[str]:
-    """``--rain`` not followed by a rain word becomes ``--rain=on`` (so the next word stays an input)."""
+    """``--rain`` followed by an input (or an option, or nothing) becomes ``--rain=on``, so the next word
+    stays an input.
+
+    The next word is taken as ``--rain``'s value, so that a wrong one (``--rain maybe``) is reported with
+    the valid words, unless it looks like an input: an existing path, a ``stim:`` spec, or a name with a
+    dot or a path separator (``clip.mp4``, ``videos/``).
+    """
     words = set(RAIN_WORDS) | set(OLD_RAIN_WORDS)
     out = []
     for i, a in enumerate(argv):
         if a == "--":
             return out + argv[i:]
-        if a == "--rain" and (i + 1 >= len(argv) or argv[i + 1].strip().lower() not in words):
+        if a == "--rain" and (i + 1 >= len(argv) or (argv[i + 1].strip().lower() not in words
+                                                      and _looks_like_input(argv[i + 1]))):
             out.append("--rain=on")
         else:
             out.append(a)
     return out
+
+
+def _looks_like_input(word: str) -> bool:
+    """Whether a word after ``--rain`` is an input or an option rather than a (wrong) rain word."""
+    return (word.startswith("-") or word.startswith("stim:") or any(c in word for c in "./\\")
+            or Path(word).exists())
 
 
 def add_rain_options(ap: argparse.ArgumentParser, default: str = "off", flag: bool = True,

@@ -129,11 +129,82 @@ def _fps_arg(path: str, fps: float | None) -> float | None:
     return fps
 
 
+#: FOURCCs of motion-JPEG streams, whose every frame states its own size (:func:`_packet_sizes`).
+MJPEG_FOURCCS = ("MJPG", "JPEG", "MJPA", "MJPB", "AVRN", "DMB1")
+#: JPEG start-of-frame markers (they hold the frame height and width).
+_JPEG_SOF = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
+
+
+def jpeg_size(data: bytes) -> tuple[int, int] | None:
+    """The (width, height) in pixels that a JPEG image states in its start-of-frame marker.
+
+    Parameters
+    ----------
+    data : bytes
+        One JPEG image (a motion-JPEG frame).
+
+    Returns
+    -------
+    (int, int) or None
+        ``None`` when ``data`` is not a JPEG or its header is cut short before the size.
+    """
+    if data[:2] != b"\xff\xd8":
+        return None
+    i = 2
+    while i + 4 <= len(data):
+        if data[i] != 0xFF:
+            return None
+        marker = data[i + 1]
+        if marker == 0xFF:  # a fill byte
+            i += 1
+        elif marker in _JPEG_SOF:
+            if i + 9 > len(data):
+                return None
+            return int.from_bytes(data[i + 7:i + 9], "big"), int.from_bytes(data[i + 5:i + 7], "big")
+        elif marker == 0x01 or 0xD0 <= marker <= 0xD8:  # markers without a length
+            i += 2
+        else:
+            i += 2 + int.from_bytes(data[i + 2:i + 4], "big")
+    return None
+
+
+def _packet_sizes(path: str) -> Iterator[tuple[int, int] | None]:
+    """The frame sizes a motion-JPEG video's packets state, in order (``None`` for one that states none).
+
+    OpenCV rescales every decoded frame to the first frame's size, so a size change
+    cannot be seen in the decoded frames; the packets, read undecoded (OpenCV's raw
+    mode, ``CAP_PROP_FORMAT = -1``), still state it.
+    """
+    c = cv2.VideoCapture(path)
+    try:
+        if not c.isOpened() or not c.set(cv2.CAP_PROP_FORMAT, -1):
+            return
+        while True:
+            level = cv2.utils.logging.getLogLevel()
+            cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)  # raw mode warns on every packet
+            try:
+                ok, packet = c.read()
+            finally:
+                cv2.utils.logging.setLogLevel(level)
+            if not ok or packet is None:
+                return
+            yield jpeg_size(packet.tobytes())
+    finally:
+        c.release()
+
+
+def _fourcc(cap: "cv2.VideoCapture") -> str:
+    code = int(cap.get(cv2.CAP_PROP_FOURCC) or 0)
+    return code.to_bytes(4, "little").decode("latin-1").upper()
+
+
 def open_video(path: str | os.PathLike, fps: float | None = None) -> FrameSource:
     """Open an OpenCV-readable video file (BGR uint8 frames).
 
     ``fps`` overrides the frame rate the container states (used when it is 0,
-    absurd or missing: 30).
+    absurd or missing: 30). A motion-JPEG frame whose size differs from the size the
+    video states (OpenCV would rescale it silently) is an :class:`InputError`:
+    ``frame N is WxH, the video states W0xH0``.
     """
     path = str(path)
     override = _fps_arg(path, fps)
@@ -144,6 +215,8 @@ def open_video(path: str | os.PathLike, fps: float | None = None) -> FrameSource
     ok, first = cap.read()
     fps = cap.get(cv2.CAP_PROP_FPS) or 30.0
     count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+    stated = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH) or 0), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT) or 0))
+    mjpeg = _fourcc(cap) in MJPEG_FOURCCS
     cap.release()
     if not ok or first is None:
         raise InputError(path, "contains no decodable frames (empty or corrupt video)")
@@ -152,17 +225,24 @@ def open_video(path: str | os.PathLike, fps: float | None = None) -> FrameSource
     if override is not None:
         fps = override
     shape = first.shape[:2]
+    if min(stated) <= 0:  # the container states no size: the first frame's
+        stated = (shape[1], shape[0])
 
     def gen() -> Iterator[np.ndarray]:
         c = cv2.VideoCapture(path)
         if not c.isOpened():
             raise InputError(path, "cannot open as a video (unsupported format or corrupt file)")
+        sizes = _packet_sizes(path) if mjpeg else None
         try:
             t = 0
             while True:
                 ok, f = c.read()
                 if not ok or f is None:
                     break
+                size = None if sizes is None else next(sizes, None)
+                if size is not None and size != stated:
+                    raise InputError(path, f"frame {t} is {size[0]}x{size[1]}, the video states "
+                                           f"{stated[0]}x{stated[1]} (frame size changed mid-video)")
                 t += 1
                 yield f
             if t == 0:
@@ -171,6 +251,8 @@ def open_video(path: str | os.PathLike, fps: float | None = None) -> FrameSource
                 raise InputError(path, f"decoding stopped at frame {t} of {count} "
                                        "(truncated or corrupt video)")
         finally:
+            if sizes is not None:
+                sizes.close()
             c.release()
 
     return FrameSource(path, float(fps), count if count > 0 else None, shape,
@@ -274,7 +356,7 @@ def open_source(path: str | os.PathLike, fps: float | None = None, color_order: 
         raise InputError(path, "file is empty")
     if is_event_file(p):
         raise InputError(path, "is an event-camera recording, not frames: 'python -m cdnf_ti.run FILE' runs the "
-                               "models on it (README, 'Event cameras'); 'python -m cdnf_ti.run events --info' "
+                               "models on it (docs/EVENTS.md); 'python -m cdnf_ti.run events --info' "
                                "summarises it")
     if p.suffix.lower() == ".npy":
         return open_npy(p, fps, color_order)

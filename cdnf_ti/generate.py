@@ -62,15 +62,16 @@ def generate_main(argv: Sequence[str]) -> int:
     ap.add_argument("--size", type=int, default=None,
                     help="frame height = width in px (default 600); start half-size scales as size/60 "
                          "(default_start_half_size)")
-    ap.add_argument("--height", type=int, default=None)
-    ap.add_argument("--width", type=int, default=None)
+    ap.add_argument("--height", type=int, default=None,
+                    help="frame height in px (default: --size, else 600); with --width, frames need not be square")
+    ap.add_argument("--width", type=int, default=None, help="frame width in px (default: --size, else 600)")
     ap.add_argument("--fps", type=positive_float, default=None, help="frames per second (default 30)")
     ap.add_argument("--duration", type=positive_float, default=None, help="motion duration in s (default 1.5)")
     add_rain_options(ap, default="off", what="the stimulus (on or off: the output is one stimulus)")
     add_seed_options(ap, rain=True, stimulus=True)
     ap.add_argument("--out", default=None, metavar="PATH",
                     help=f"the output: a .avi file (FFV1) or a folder (PNG frames) (default: {DEFAULT_OUT}/NAME.avi)")
-    ap.add_argument("--no-progress", action="store_true")
+    ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     args = ap.parse_args(list(argv))
     if args.rain == "both":
         raise UserError("generate writes one stimulus: --rain on or off, not both (run it twice)")
@@ -136,7 +137,7 @@ def rain_main(argv: Sequence[str]) -> int:
     add_rain_options(ap, flag=False)
     add_seed_options(ap, rain=True)
     ap.add_argument("--format", choices=("avi", "png"), default="avi", help="FFV1 AVI (default) or PNG folders")
-    ap.add_argument("--no-progress", action="store_true")
+    ap.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     args = ap.parse_args(list(argv))
     params = RainParams(drops=args.rain_drops)
     seed = rain_seed_of(args)

@@ -25,6 +25,7 @@ option is wrong (one ``error:`` line); 1 when the stream failed after it started
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -58,6 +59,7 @@ from .cli_common import (
     positive_float,
 )
 from .errors import InputError, UserError, output_error
+from .experiments.parallel import acknowledge_signal
 from .limits import check_frame_size
 from .live_sources import Capture, Frame, LatestFrames, ProcessCapture, SourceSpec, StreamEnded, parse_source
 from .models import create_model
@@ -338,6 +340,7 @@ class Recorder:
         self.fps = float(fps)
         self._queue: queue.Queue = queue.Queue(maxsize=backlog)
         self._thread: threading.Thread | None = None
+        self._cut = threading.Event()  # finish_now(): end the movie at the frame being written
         self.error: BaseException | None = None
         self.written = 0
         self.lost = 0
@@ -355,9 +358,9 @@ class Recorder:
         size = None
         last_index, last_session, last_image = None, None, None
         max_fill = int(self.fps * 10)
-        while True:
+        while not self._cut.is_set():
             item = self._queue.get()
-            if item is None:
+            if item is None or self._cut.is_set():
                 return
             frame, results = item
             image = annotate(frame.image, results, frame)
@@ -367,6 +370,8 @@ class Recorder:
                 image = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
             if last_image is not None and frame.session == last_session:
                 for _ in range(min(frame.index - last_index - 1, max_fill)):
+                    if self._cut.is_set():
+                        return
                     yield last_image
             last_index, last_session, last_image = frame.index, frame.session, image
             yield image
@@ -389,6 +394,17 @@ class Recorder:
             return
         self._queue.put(None)
         self._thread.join()
+
+    def finish_now(self, timeout_s: float = 10.0) -> None:
+        """Finish the file with the frames written so far, leaving the queued ones out (a second Ctrl-C
+        during the clean stop): the movie is closed and renamed into place, playable. Waits at most
+        ``timeout_s`` seconds for the writer."""
+        if self._thread is None:
+            return
+        self._cut.set()
+        with contextlib.suppress(queue.Full):
+            self._queue.put_nowait(None)  # wakes a writer waiting for a frame
+        self._thread.join(timeout_s)
 
 
 # -- the loop ------------------------------------------------------------------------------------------
@@ -477,6 +493,20 @@ class LiveSummary:
 
 def _round(x: float | None, n: int) -> float | None:
     return None if x is None else round(float(x), n)
+
+
+def model_start_record(model) -> dict:
+    """A model in the ``start`` event: its name, output and alert rule (:meth:`~cdnf_ti.models.base.Model.alert_rule`).
+
+    ``threshold`` is the rule's level (for the LGMD family the spike count ``n_ts``), ``rule`` the rule in
+    words, ``compares`` the per-frame value it compares (a frame line's output or diagnostic).
+    A model-like object without ``alert_rule`` gives its ``threshold`` and no rule.
+    """
+    rule = model.alert_rule() if hasattr(model, "alert_rule") else None
+    if rule is None:
+        return {"model": model.name, "output": model.output_name, "threshold": model.threshold}
+    return {"model": model.name, "output": model.output_name, "threshold": rule.level, "rule": rule.rule,
+            "compares": rule.column}
 
 
 class LiveLoop:
@@ -576,7 +606,7 @@ class LiveLoop:
         capture.start()
         start = {"event": "start", "source": capture.spec.text, "kind": capture.spec.kind, "width": w, "height": h,
                  "fps": round(capture.fps, 3), "queue": self.frames.maxsize,
-                 "models": [{"model": m.name, "output": m.output_name, "threshold": m.threshold} for m in models],
+                 "models": [model_start_record(m) for m in models],
                  "compile_s": round(summary.compile_s, 3)}
         self.sinks.emit(start)
         self.sinks.flush()
@@ -718,10 +748,12 @@ def _parser() -> argparse.ArgumentParser:
 
 
 class _Signals:
-    """SIGINT and SIGTERM set :attr:`stop` (the loop ends cleanly); a second one ends the process at once."""
+    """SIGINT and SIGTERM set :attr:`stop` (the loop ends cleanly); a second one ends the process at once,
+    after ``before_exit`` (the recording is finished with what was written: :meth:`Recorder.finish_now`)."""
 
-    def __init__(self, stop: threading.Event):
+    def __init__(self, stop: threading.Event, before_exit: Callable[[], None] | None = None):
         self.stop = stop
+        self.before_exit = before_exit
         self.received: int | None = None
         self._old: dict = {}
 
@@ -732,8 +764,13 @@ class _Signals:
         return self
 
     def _handle(self, signum, frame) -> None:
+        acknowledge_signal()
         if self.received is not None:
-            os._exit(EXIT_INTERRUPTED if signum == signal.SIGINT else 128 + signum)
+            try:
+                if self.before_exit is not None:
+                    self.before_exit()
+            finally:
+                os._exit(EXIT_INTERRUPTED if signum == signal.SIGINT else 128 + signum)
         self.received = signum
         self.stop.set()
 
@@ -765,7 +802,7 @@ def main(argv: Sequence[str]) -> int:
     loop = LiveLoop(capture, make_models, sinks, status=status, recorder=recorder,
                     duration_s=args.duration or math.inf, diagnostics=args.diagnostics)
     code = EXIT_OK
-    with _Signals(loop.stop) as signals:
+    with _Signals(loop.stop, recorder.finish_now if recorder is not None else None) as signals:
         loop.open(len(names))  # a source that cannot be opened: one error line, exit 2
         if args.jsonl is not None:
             try:

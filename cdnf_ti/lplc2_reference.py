@@ -33,6 +33,17 @@ Per frame ``t`` (luminance ``L`` in [0, 1], time step ``dt = 1 / fps``, their 10
   -80 mV; a substep with ``V > -50`` mV is a spike (recorded as +20 mV) and
   resets V to -70 mV. The alert is a spike.
 
+``variant="real"``: the rule of the authors' robot and real-environment folders
+(``code/5_...``, ``code/6_...``, ``code/7_Real-Environment-Test-About-Animals``,
+whose ``lplc2conv2.m`` is the same in all three): a unit counts when at least 3
+of its 4 arms exceed 1.5 and none is at or below -2 (nor exactly 0); its
+response is ``|product of the four arms|``. As folder 7's ``loom.m``, that
+variant takes the green channel of a colour frame (``B(:,:,2) / 255``) and
+shrinks it to a quarter with MATLAB's ``imresize(.., 0.25)`` (bicubic with
+antialiasing, :func:`matlab_imresize`) before the EMD; ``height, width`` are
+the frame's size before the shrink. ``variant="arena"`` (default) is the rule
+above, folders 2-4.
+
 Frame alignment: their loop index ``i`` (1-based) processes pictures ``i``
 and ``i + 1``; its outputs (``nums(i)``, ``I(i)``, the membrane samples
 ``v(20 (i-1) + 2 .. 20 i + 1)``) are this reference's frame ``i`` (0-based).
@@ -49,6 +60,17 @@ from .errors import InputError, UserError
 
 #: The authors' time step (s): their stimuli are 100 frames/s.
 AUTHORS_DT = 0.01
+
+#: Unit rules: ``arena`` (folders 2-4 of the authors' code), ``real`` (folders 5-7).
+VARIANTS = ("arena", "real")
+#: ``variant="real"``: an arm is strong above this ...
+REAL_ARM_THRESHOLD = 1.5
+#: ... a unit needs at least this many strong arms ...
+REAL_MIN_ARMS = 3
+#: ... and every arm above this floor (their ``threshold_2``).
+REAL_ARM_FLOOR = -2.0
+#: ``variant="real"``: frames are shrunk by this factor (folder 7's ``imresize(movieData, 0.25)``).
+REAL_SCALE = 0.25
 
 
 @dataclass(frozen=True)
@@ -90,6 +112,36 @@ class LPLC2Step:
     trace: tuple  #: the frame's membrane samples, one per substep (+20 mV for a spike)
 
 
+def _cubic(x: np.ndarray) -> np.ndarray:
+    """MATLAB's bicubic kernel (Keys, a = -0.5)."""
+    ax = np.abs(x)
+    return ((1.5 * ax**3 - 2.5 * ax**2 + 1.0) * (ax <= 1)
+            + (-0.5 * ax**3 + 2.5 * ax**2 - 4.0 * ax + 2.0) * ((ax > 1) & (ax <= 2)))
+
+
+def _resize_matrix(n_in: int, scale: float) -> np.ndarray:
+    """The (ceil(scale n_in), n_in) weights of MATLAB's ``imresize`` along one axis (bicubic, antialiased
+    when shrinking, mirrored border)."""
+    n_out = int(np.ceil(scale * n_in))
+    width = 4.0 / scale if scale < 1 else 4.0
+    u = np.arange(1, n_out + 1) / scale + 0.5 * (1.0 - 1.0 / scale)  # output centres on the input axis (1-based)
+    left = np.floor(u - width / 2.0)
+    ind = left[:, None] + np.arange(int(np.ceil(width)) + 2)[None, :]
+    wts = scale * _cubic(scale * (u[:, None] - ind)) if scale < 1 else _cubic(u[:, None] - ind)
+    wts /= wts.sum(axis=1, keepdims=True)
+    mirror = np.concatenate([np.arange(n_in), np.arange(n_in)[::-1]])
+    idx = mirror[(ind.astype(np.int64) - 1) % (2 * n_in)]
+    out = np.zeros((n_out, n_in))
+    np.add.at(out, (np.repeat(np.arange(n_out), ind.shape[1]), idx.ravel()), wts.ravel())
+    return out
+
+
+def matlab_imresize(img: np.ndarray, scale: float) -> np.ndarray:
+    """MATLAB's ``imresize(img, scale)`` of a float (H, W) image: bicubic, antialiased when shrinking,
+    output ``ceil(scale H) x ceil(scale W)``; rows first, then columns; no clipping."""
+    return _resize_matrix(img.shape[0], scale) @ img @ _resize_matrix(img.shape[1], scale).T
+
+
 def _window_sum(x: np.ndarray, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
     """``out(y, x) = sum x(y + r0 .. y + r1, x + c0 .. x + c1)``, zero outside; same shape as x."""
     h, w = x.shape
@@ -116,10 +168,25 @@ class LPLC2Reference:
         (the authors' 100 frames/s by default).
     params : LPLC2Params, optional
 
-    Frames are (H, W) float luminance in [0, 1] or uint8 (divided by 255).
+    variant : {"arena", "real"}
+        The unit rule (module docstring): ``"arena"`` (default) the authors'
+        folders 2-4, ``"real"`` their robot and real-environment folders 5-7,
+        with folder 7's green channel and quarter-size frames.
+
+    Frames are (H, W) float luminance in [0, 1] or uint8 (divided by 255);
+    ``variant="real"`` also takes (H, W, 3) uint8 BGR frames (their green channel).
+    The LPLC2 array is (h-1, w-1) with ``(h, w)`` the frame size, after the
+    shrink in ``variant="real"`` (``ceil(H / 4), ceil(W / 4)``).
     """
 
-    def __init__(self, height: int, width: int, fps: float = 1.0 / AUTHORS_DT, params: LPLC2Params | None = None):
+    def __init__(self, height: int, width: int, fps: float = 1.0 / AUTHORS_DT, params: LPLC2Params | None = None,
+                 variant: str = "arena"):
+        if variant not in VARIANTS:
+            raise UserError(f"variant must be one of {', '.join(VARIANTS)}, got {variant!r}")
+        self.variant = variant
+        self.input_shape = (int(height), int(width))
+        if variant == "real":
+            height, width = (int(np.ceil(REAL_SCALE * int(n))) for n in (height, width))
         if int(height) < 2 or int(width) < 2:
             raise UserError(f"frame must be at least 2x2 px, got {width}x{height}")
         if not (np.isfinite(fps) and fps > 0):
@@ -147,13 +214,28 @@ class LPLC2Reference:
         self.motion_maps = np.zeros((4, self.height - 1, self.width - 1))
 
     def luminance(self, frame: np.ndarray) -> np.ndarray:
-        """Frame -> float64 luminance in [0, 1], shape (H, W); validates shape and values."""
+        """Frame -> float64 luminance in [0, 1], shape (H, W); validates shape and values.
+
+        ``variant="real"``: the green channel of a BGR frame (a grey frame as it is), shrunk
+        by :func:`matlab_imresize` to the array size (bicubic: may leave [0, 1] slightly)."""
         f = np.asarray(frame)
         where = f"frame {self.t}"
+        if self.variant == "real":
+            if f.ndim == 3 and f.shape[2] == 3 and f.dtype == np.uint8:
+                f = f[:, :, 1]
+            if f.ndim != 2 or f.shape != self.input_shape:
+                raise InputError(where, f"expected a {self.input_shape[1]}x{self.input_shape[0]} grey or uint8 BGR "
+                                        f"frame, got shape {f.shape} {f.dtype}")
+            return matlab_imresize(self._unit_range(f, where), REAL_SCALE)
         if f.ndim != 2:
             raise InputError(where, f"expected an (H, W) grey frame, got shape {f.shape}")
         if f.shape != (self.height, self.width):
             raise InputError(where, f"expected {self.width}x{self.height} px, got {f.shape[1]}x{f.shape[0]}")
+        return self._unit_range(f, where)
+
+    @staticmethod
+    def _unit_range(f: np.ndarray, where: str) -> np.ndarray:
+        """uint8 / 255, or a float frame checked to be finite and in [0, 1]; float64."""
         if f.dtype == np.uint8:
             return f.astype(np.float64) / 255.0
         if not np.issubdtype(f.dtype, np.floating):
@@ -190,7 +272,17 @@ class LPLC2Reference:
             _window_sum(vertical, -(hs - 1), 0, lo, hi),  # upper half: outward = upward
             _window_sum(-vertical, 1, hs, lo, hi),  # lower half: outward = downward
         ])
+        if self.variant == "real":
+            return np.where(a > REAL_ARM_FLOOR, a, 0.0)
         return np.where(a > p.arm_threshold, a, 0.0)
+
+    def units(self, arm_maps: np.ndarray) -> np.ndarray:
+        """LPLC2 responses from the thresholded arms, shape (H-1, W-1): their product (``arena``), or
+        ``|product|`` where at least :data:`REAL_MIN_ARMS` arms exceed :data:`REAL_ARM_THRESHOLD` (``real``)."""
+        if self.variant == "real":
+            strong = (arm_maps > REAL_ARM_THRESHOLD).sum(axis=0) >= REAL_MIN_ARMS
+            return np.abs(arm_maps.prod(axis=0)) * strong
+        return arm_maps.prod(axis=0)
 
     def _lif(self, v: float, current: float) -> float:
         """One RK4 substep of ``tau dV/dt = -V + L + R I`` (held at the floor when V <= floor)."""
@@ -219,7 +311,7 @@ class LPLC2Reference:
             return LPLC2Step(self.v, 0, False, 0, 0.0, 0.0, (0.0,) * 4, (self.v,) * p.substeps)
         motion = self.motion(lum)
         arm_maps = self.arms(motion)
-        lplc2 = arm_maps.prod(axis=0)
+        lplc2 = self.units(arm_maps)
         active = int(np.count_nonzero(lplc2 > 0))
         n1 = active / p.normal_count
         n2 = n1 if self.active_prev is None else self.active_prev / p.normal_count

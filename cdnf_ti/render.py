@@ -11,7 +11,7 @@ finds each field's range over the whole clip (0.5 and 99.5 percentiles of each
 frame, then the extremes of those), so a colour means the same value in every
 frame. Signed fields use a diverging map symmetric about 0.
 
-An event recording (README, "Event cameras") is rendered bin by bin: the model takes each
+An event recording (docs/EVENTS.md) is rendered bin by bin: the model takes each
 bin through its ON/OFF input stage, and the input panel shows the bin's net contrast
 ``P_on - P_off`` on grey, ON events green and OFF events red (:func:`event_panel`).
 
@@ -63,6 +63,7 @@ from .inputs import resolve_input
 from .limits import check_frame_size
 from .models import create_model, get_model_class
 from .models.base import NotConvergedWarning
+from .paths import inside
 from .stimuli.rain import RainParams, RainyFrames
 from .video import codec_for, write_video
 
@@ -80,9 +81,26 @@ def _pick_fields(model_name: str, fields: dict[str, np.ndarray]) -> list[tuple[s
 CBAR_W = 56
 
 
+def _diverging_lut() -> np.ndarray:
+    """A diverging colour map for :func:`cv2.applyColorMap`, (256, 1, 3) uint8 BGR: blue (most negative),
+    white (0, the middle), red (most positive); ColorBrewer's RdBu stops, interpolated."""
+    rgb = np.array([(33, 102, 172), (67, 147, 195), (146, 197, 222), (209, 229, 240), (247, 247, 247),
+                    (253, 219, 199), (244, 165, 130), (214, 96, 77), (178, 24, 43)], float)
+    x = np.linspace(0.0, 255.0, len(rgb))
+    lut = np.stack([np.interp(np.arange(256), x, rgb[:, c]) for c in (2, 1, 0)], axis=1)  # BGR
+    return np.rint(lut).astype(np.uint8)[:, None, :]
+
+
+#: The colour map of a signed field (symmetric about 0): diverging, white at 0.
+DIVERGING = _diverging_lut()
+#: The colour map of a non-negative field (from 0): sequential, dark at 0 and light at the top.
+SEQUENTIAL = cv2.COLORMAP_VIRIDIS
+
+
 class FieldScale:
     """A fixed colour scale of one field: ``lo .. hi``; a field with negative values is shown
-    symmetric about 0 with a diverging map, a non-negative one from 0 with TURBO.
+    symmetric about 0 with a diverging map (:data:`DIVERGING`, white at 0), a non-negative one
+    from 0 with a sequential map (:data:`SEQUENTIAL`).
 
     Without a range (``FieldScale()``) the scale grows with the values it has seen (a running
     range; :func:`render_frames` called without ``ranges``).
@@ -105,8 +123,9 @@ class FieldScale:
             return -m, m
         return min(self.lo, 0.0), max(self.hi, min(self.lo, 0.0) + 1e-6)
 
-    def _cmap(self) -> int:
-        return cv2.COLORMAP_TWILIGHT_SHIFTED if self.signed else cv2.COLORMAP_TURBO
+    def _cmap(self) -> int | np.ndarray:
+        """:data:`DIVERGING` for a signed field, :data:`SEQUENTIAL` for a non-negative one."""
+        return DIVERGING if self.signed else SEQUENTIAL
 
     def __call__(self, a: np.ndarray) -> np.ndarray:
         """The field as a BGR image (uint8, (H, W, 3))."""
@@ -143,6 +162,17 @@ def robust_range(a: np.ndarray) -> tuple[float, float]:
 
 #: The key of the event panel's scale in :func:`field_ranges`.
 EVENTS_KEY = "events"
+#: The key of the trace panel's y range in :func:`field_ranges`.
+TRACE_KEY = "trace"
+
+
+def _trace_values(model: Any, res: Any, n_ts: int | None) -> tuple[float, float | None]:
+    """What the trace panel draws for one step: the spike count and ``n_ts`` (the LGMD family), else the
+    output and its threshold (SDNF: the dynamic one; None: none)."""
+    if "count" in res.diagnostics and n_ts is not None:
+        return float(res.diagnostics["count"]), float(n_ts)
+    dyn = res.diagnostics.get("dyn_threshold")
+    return float(res.output), (float(dyn) if dyn is not None else model.threshold)
 
 
 def _step(model: Any, item: Any) -> Any:
@@ -157,14 +187,20 @@ def field_ranges(model: Any, frames: Iterator[np.ndarray], progress: bool | str 
     """First pass of a movie: each shown field's range over all ``frames`` (the colour bars' fixed scales).
 
     Returns ``{field: (lo, hi)}``: the smallest 0.5 and the largest 99.5 percentile over the frames;
-    for event bins also ``{"events": (-m, m)}``, ``m`` the largest net contrast (:func:`event_scale`).
+    for event bins also ``{"events": (-m, m)}``, ``m`` the largest net contrast (:func:`event_scale`);
+    and ``{"trace": (lo, hi)}``, the range of the trace panel's values and threshold (its fixed y axis).
     """
     model.reset()
     ranges: dict[str, tuple[float, float]] = {}
+    n_ts = getattr(getattr(model, "params", None), "n_ts", None)
     bar = tqdm(total=n_total, desc=progress, unit="frame", disable=None) if isinstance(progress, str) else None
     try:
         for frame in frames:
-            _step(model, frame)
+            res = _step(model, frame)
+            vals = [v for v in _trace_values(model, res, n_ts) if v is not None and np.isfinite(v)]
+            if vals:
+                old = ranges.get(TRACE_KEY, (min(vals), max(vals)))
+                ranges[TRACE_KEY] = (min(old[0], *vals), max(old[1], *vals))
             if isinstance(frame, tuple):  # the event panel's scale: the largest net contrast of the recording
                 m = max(event_scale(*frame), ranges.get(EVENTS_KEY, (0.0, 0.0))[1])
                 ranges[EVENTS_KEY] = (-m, m)
@@ -253,17 +289,28 @@ def _label(img: np.ndarray, text: str) -> None:
     cv2.putText(img, text, (4, 13), PANEL_FONT, 0.42, (255, 255, 255), 1, cv2.LINE_AA)
 
 
+#: The labelled window's band in the trace panel (BGR), and the colour's name in the panel's title.
+WINDOW_BGR = (160, 80, 220)
+WINDOW_COLOUR = "pink"
+
+
+def window_legend(window: tuple[int, int] | None) -> str | None:
+    """The trace panel's legend of the labelled window's band, naming its colour; None without a window."""
+    return None if window is None else f"{WINDOW_COLOUR}: labelled window, {window[0]}-{window[1]}"
+
+
 def _trace_panel(width: int, t: int, n_total: int | None, out: list[float], thr: list[float | None],
                  spikes: list[bool], name: str, fps: float, window: tuple[int, int] | None,
-                 unit: str = "frame") -> np.ndarray:
+                 unit: str = "frame", ylim: tuple[float, float] | None = None) -> np.ndarray:
     """The output so far (white), its threshold (dashed yellow), alerts (red) over frames 0..n_total
-    (``unit``: what a step is called, ``"frame"``, or ``"bin"`` for an event recording)."""
+    (``unit``: what a step is called, ``"frame"``, or ``"bin"`` for an event recording). ``ylim``: the
+    y axis's range over the whole movie (fixed while it plays); without it, the range of the values so far."""
     h = TRACE_H
     img = np.full((h, width, 3), 24, np.uint8)
     n = max(n_total or 0, t + 1, 2)
     x0, x1, y0, y1 = 46, width - 8, 24, h - 24
     vals = [v for v in out if np.isfinite(v)] + [v for v in thr if v is not None and np.isfinite(v)]
-    lo, hi = (min(vals), max(vals)) if vals else (0.0, 1.0)
+    lo, hi = ylim if ylim is not None else ((min(vals), max(vals)) if vals else (0.0, 1.0))
     if hi - lo < 1e-6:
         hi = lo + 1e-3
     pad = 0.08 * (hi - lo)
@@ -276,7 +323,7 @@ def _trace_panel(width: int, t: int, n_total: int | None, out: list[float], thr:
         return int(round(y1 - (y1 - y0) * (v - lo) / (hi - lo)))
 
     if window is not None:
-        cv2.rectangle(img, (X(window[0] - 0.5), y0), (X(window[1] + 0.5), y1), (120, 80, 160), -1)
+        cv2.rectangle(img, (X(window[0] - 0.5), y0), (X(window[1] + 0.5), y1), WINDOW_BGR, -1)
     cv2.rectangle(img, (x0, y0), (x1, y1), (90, 90, 90), 1)
     for i in range(0, n, max(1, int(round(fps)))):  # a tick per second
         cv2.line(img, (X(i), y1), (X(i), y1 + 4), (160, 160, 160), 1)
@@ -294,9 +341,13 @@ def _trace_panel(width: int, t: int, n_total: int | None, out: list[float], thr:
             cv2.line(img, (X(i), y1 - 10), (X(i), y1), (0, 0, 255), 2)
     cv2.line(img, (X(t), y0), (X(t), y1), (0, 255, 0), 1)
     alert = bool(spikes and spikes[-1])
-    cv2.putText(img, f"{name}  {unit} {t}  t={t / fps:.2f}s  (x axis: {unit}s; purple: labelled window)", (x0, 16),
-                PANEL_FONT, 0.42, (255, 255, 255), 1, cv2.LINE_AA)
+    cv2.putText(img, f"{name}  {unit} {t}  t={t / fps:.2f}s  (x axis: {unit}s)", (x0, 16), PANEL_FONT, 0.42,
+                (255, 255, 255), 1, cv2.LINE_AA)
     cv2.putText(img, "-- threshold", (x0 + 4, y0 + 12), PANEL_FONT, 0.35, (0, 220, 255), 1, cv2.LINE_AA)
+    legend = window_legend(window)
+    if legend is not None:  # a swatch of the band's colour, then its name
+        cv2.rectangle(img, (x0 + 4, y0 + 18), (x0 + 14, y0 + 26), WINDOW_BGR, -1)
+        cv2.putText(img, legend, (x0 + 18, y0 + 26), PANEL_FONT, 0.35, (255, 255, 255), 1, cv2.LINE_AA)
     if alert:
         cv2.putText(img, "ALERT", (x1 - 60, y0 + 16), PANEL_FONT, 0.55, (0, 0, 255), 2, cv2.LINE_AA)
     return img
@@ -338,14 +389,10 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
     try:
         for t, frame in enumerate(frames):
             res = _step(model, frame)
-            if "count" in res.diagnostics and n_ts is not None:
-                uses_count = True
-                out.append(float(res.diagnostics["count"]))
-                thr.append(float(n_ts))
-            else:
-                out.append(float(res.output))
-                dyn = res.diagnostics.get("dyn_threshold")
-                thr.append(float(dyn) if dyn is not None else model.threshold)
+            uses_count = uses_count or ("count" in res.diagnostics and n_ts is not None)
+            value, level = _trace_values(model, res, n_ts)
+            out.append(value)
+            thr.append(level)
             spikes.append(bool(res.spike))
             if isinstance(frame, tuple):
                 ev = (ranges or {}).get(EVENTS_KEY)
@@ -368,7 +415,7 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
             top = np.concatenate([np.concatenate(panels[:2], 1), np.concatenate(panels[2:4], 1)], 0)
             name = f"{model.name} spike count (n_ts {n_ts})" if uses_count else f"{model.name} {model.output_name}"
             trace = _trace_panel(top.shape[1], t, n_total, out, thr, spikes, name, fps, window,
-                                 "bin" if isinstance(frame, tuple) else "frame")
+                                 "bin" if isinstance(frame, tuple) else "frame", (ranges or {}).get(TRACE_KEY))
             movie = np.concatenate([top, trace], 0)
             if movie.shape[0] % 2 or movie.shape[1] % 2:  # even sizes for MPEG-4
                 movie = movie[: movie.shape[0] // 2 * 2, : movie.shape[1] // 2 * 2]
@@ -405,7 +452,7 @@ def render_video(source: str | Path, model_name: str, out: str | Path, params: A
     is_events = isinstance(src, EventSource)
     if is_events and rain is not None:
         raise InputError(source, "is an event recording; --rain applies to frames only")
-    check_frame_size(*src.shape, n_models=1, what=str(source))
+    check_frame_size(*src.shape, n_models=1, what=str(source), binning=is_events)
     if window is not None:
         last = src.n_frames - 1 if src.n_frames else None
         if not 0 <= window[0] <= window[1] or (last is not None and window[1] > last):
@@ -444,7 +491,9 @@ def open_render_input(source: str | Path, fps: float | None = None, color_order:
     (binned as ``events`` says), else a frame source (:func:`~cdnf_ti.inputs.resolve_input`)."""
     if is_event_file(source):
         ev = events or {}
-        return open_event_source(source, ev.get("sensor_size"), ev.get("bin_ms", DEFAULT_BIN_MS), quiet=quiet)
+        limits = {k: ev[k] for k in ("max_gap_s", "max_span_s") if k in ev}  # --max-gap-s, --max-span-s
+        return open_event_source(source, ev.get("sensor_size"), ev.get("bin_ms", DEFAULT_BIN_MS), quiet=quiet,
+                                 **limits)
     return resolve_input(source, fps=fps, color_order=color_order)
 
 
@@ -503,14 +552,14 @@ def render_main(argv: Sequence[str]) -> int:
         targets = [out]
     else:
         folder = prepare_output(out)
-        targets = [folder / movie_name(clip, m, c) for m, c in jobs]
+        targets = [inside(folder, movie_name(clip, m, c)) for m, c in jobs]
     rain = RainParams(drops=args.rain_drops) if "rain" in conditions else None
     for (m, c), target in zip(jobs, targets):
         label = f"render {Path(str(args.input)).name} [{m}{'' if c == 'clean' else ', ' + c}]"
         n = render_video(args.input, m, target, params=params[m], backend=args.backend, arch=args.arch, window=window,
                          progress=False if args.no_progress else label, fps=args.fps, color_order=args.color_order,
                          rain=rain if c == "rain" else None, rain_seed=rain_seed_of(args), events=events)
-        print(f"{target}: {n} frames", file=sys.stderr)
+        print(f"{target}: {n} frames")  # results on stdout, as run's lines
     return EXIT_OK
 
 
@@ -531,7 +580,7 @@ def render_dataset(run: Any, folder: str | Path, progress: bool = False, params:
             if row is None:
                 continue
             src = trace_path(run.out, row["condition"], lab.clip, m, "json")
-            movie = Path(run.out) / "movies" / f"{lab.clip}.{m}.mp4"
+            movie = inside(Path(run.out) / "movies", movie_name(lab.clip, m))
             if movie.is_file() and src.is_file() and movie.stat().st_mtime >= src.stat().st_mtime:
                 made.append(movie)
                 continue

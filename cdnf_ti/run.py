@@ -24,6 +24,7 @@ result (for ``run``: also when every input failed); 130 interrupted (Ctrl-C).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import importlib
 import io
@@ -31,6 +32,7 @@ import math
 import os
 import sys
 import warnings
+from multiprocessing import util as mp_util
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -64,12 +66,18 @@ from .cli_common import (
 from .errors import InputError, UserError
 from .events.readers import is_event_file
 from .events.source import EventSource, open_event_source
-from .experiments.parallel import exit_on_second_interrupt, stop_all_pools
+from .experiments.parallel import (
+    exit_on_second_interrupt,
+    handle_sigterm_as_interrupt,
+    stop_all_pools,
+    watch_interrupts,
+)
 from .frames import IMAGE_EXTENSIONS, iter_grey
 from .inputs import resolve_input
 from .limits import check_drops, check_frame_size
 from .models import create_model, get_model_class
 from .models.base import NotConvergedWarning, run_models
+from .paths import inside
 from .stimuli.rain import RainParams, RainyFrames
 from .taichi_runtime import lanes_override
 
@@ -98,7 +106,7 @@ def _videos_parser() -> argparse.ArgumentParser:
                     f"Subcommands: {', '.join(SUBCOMMANDS)} (e.g. 'python -m cdnf_ti.run demo --help').",
     )
     ap.add_argument("inputs", nargs="+", metavar="VIDEO",
-                    help="video file, folder of images, .npy array, event recording (README, 'Event cameras'), or a "
+                    help="video file, folder of images, .npy array, event recording (docs/EVENTS.md), or a "
                          "generated stimulus "
                          "'stim:NAME[?coherence=C&seed=S&size=N...]' (see cdnf_ti.inputs)")
     add_output_option(ap)
@@ -151,10 +159,11 @@ def _run_videos(args, models: list[str], params: dict, out: Path, write_text) ->
             if is_event_file(path):
                 if rain_params is not None:
                     raise InputError(path, "is an event recording; --rain applies to frames only")
-                src = open_event_source(path, args.sensor_size, args.bin_ms)
+                src = open_event_source(path, args.sensor_size, args.bin_ms, max_gap_s=args.max_gap_s,
+                                        max_span_s=args.max_span_s)
             else:
                 src = resolve_input(path, fps=args.fps, color_order=args.color_order)
-            check_frame_size(*src.shape, n_models=len(models), what=str(path))
+            check_frame_size(*src.shape, n_models=len(models), what=str(path), binning=isinstance(src, EventSource))
             if rain_params is not None:
                 check_drops(args.rain_drops, src.shape, what="--rain-drops")
             sources.append((path, src))
@@ -178,6 +187,8 @@ def _run_videos(args, models: list[str], params: dict, out: Path, write_text) ->
                                   rain_params if condition == "rain" else None, rain_seed)
             summary += rows
             ran += n_ok
+    if not ran:  # every input failed: the output folder is left as it was (a folder made for the run is removed)
+        return EXIT_USAGE
     merge_summary(out / "summary.csv", sorted(summary, key=lambda r: r["_i"]), write_text)
     print(f"results in {out}/ (summary.csv lists every run made into this folder)", file=sys.stderr)
     n_failed = sum(1 for r in summary if str(r.get("status", "")).startswith("error"))
@@ -221,16 +232,21 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
             print(f"warning: {path}: {problem}", file=sys.stderr)
     rows = []
     ran = 0
+    settings = run_settings(args, path, src, rain_params, rain_seed)
     for name, model, trace, err in zip(models, instances, traces, errors):
         if err is not None:
             msg = str(err) if isinstance(err, UserError) else f"{type(err).__name__}: {err}"
             print(f"error: {path} [{name}]: {msg}".splitlines()[0], file=sys.stderr)
             rows.append(_error_row(index, path, clip, name, condition, msg))
             continue
+        if trace.n_frames == 0:  # a source that yielded nothing (an event recording says so itself)
+            print(f"error: {path}: holds no frames", file=sys.stderr)
+            rows.append(_error_row(index, path, clip, name, condition, "holds no frames"))
+            continue
         ran += 1
         trace_name = trace_file_name(clip, name, condition)
-        trace.to_csv(out / trace_name)
-        alert = alert_summary(trace, getattr(model, "params", None), src.fps)
+        trace.to_csv(inside(out, trace_name))
+        alert = alert_summary(trace, model.alert_rule(), src.fps)
         fa = alert.first_alert
         fa_txt = f"{fa} ({alert.first_alert_s:.2f} s)" if fa is not None else "none"
         unconv = int((~trace.converged).sum())
@@ -238,29 +254,32 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
         if rain is not None:
             note += f", rain SNR {rain.snr_db:.2f} dB"
         fps = trace.fps
-        fps_txt = f"{fps:.1f} fps" if math.isfinite(fps) else "n/a fps (one frame)"
+        fps_txt = f"{fps:.1f} fps" if math.isfinite(fps) else "n/a fps (no frame without set-up)"
+        if trace.compile_seconds >= 0.05:
+            fps_txt += f" (set-up and compiling {trace.compile_seconds:.1f} s apart)"
         out_name = "" if clip == src.name else f" -> {clip}"
         cond_txt = "" if condition == "clean" else f" ({condition})"
         extra = "" if alert.quantity == trace.output_name else f" (max {trace.output_name} {trace.output.max():.4f})"
         print(f"{path}{out_name} [{name}]{cond_txt}: {trace.n_frames} frames, first alert {fa_txt}; "
               f"{alert.text()}{extra}; {fps_txt}{note}")
         rows.append({"_i": index, "input": str(path), "clip": clip, "model": name, "condition": condition,
-                     "params": params_text(model), "trace": trace_name,
+                     "params": params_text(model), "settings": settings_text(settings), "trace": trace_name,
                      "frames": trace.n_frames, "video_fps": f"{src.fps:g}",
                      "first_alert": "" if fa is None else fa,
                      "first_alert_s": "" if alert.first_alert_s is None else f"{alert.first_alert_s:.4f}",
                      "alert_rule": alert.rule, "alert_peak": f"{alert.peak:.6g}", "alert_level": f"{alert.level:g}",
                      "max_output": f"{trace.output.max():.6f}",
                      "proc_fps": f"{fps:.2f}" if math.isfinite(fps) else "",
+                     "compile_s": f"{trace.compile_seconds:.3f}",
                      "status": "ok" if not unconv else "unconverged",
                      "rain_snr_db": f"{rain.snr_db:.4f}" if rain is not None else ""})
     return rows, ran
 
 
 #: Columns of ``run``'s summary.csv, in order (see the README's table of CSV columns).
-SUMMARY_COLUMNS = ("input", "clip", "model", "condition", "params", "trace", "frames", "video_fps", "first_alert",
-                   "first_alert_s", "alert_rule", "alert_peak", "alert_level", "max_output", "proc_fps", "status",
-                   "rain_snr_db")
+SUMMARY_COLUMNS = ("input", "clip", "model", "condition", "params", "settings", "trace", "frames", "video_fps",
+                   "first_alert", "first_alert_s", "alert_rule", "alert_peak", "alert_level", "max_output", "proc_fps",
+                   "compile_s", "status", "rain_snr_db")
 
 
 def trace_file_name(clip: str, model: str, condition: str) -> str:
@@ -278,6 +297,61 @@ def params_text(model) -> str:
     except TypeError:
         default = {}
     return ";".join(f"{k}={v}" for k, v in params.to_dict().items() if default.get(k, object()) != v)
+
+
+def run_settings(args, path, src, rain_params, rain_seed: int) -> dict[str, str]:
+    """The options besides the model's parameters that change a run's result, as ``{name: value}``.
+
+    With the clip, model, condition and parameters they are the run's identity (docs/EXPERIMENTS.md,
+    "Run identity"): the engine (``backend``); for frames the frame rate (``fps``: ``--fps`` or
+    the video's own) and, for a ``.npy`` array, ``color_order``; for an event recording
+    ``bin_ms``, ``event_threshold`` and ``sensor_size`` (WxH, given or found); under rain the
+    droplets per frame (``rain_drops``, the default resolved for the frame size) and
+    ``rain_seed``. Values are the settings in effect, not the options as typed.
+    """
+    settings = {"backend": str(args.backend)}
+    if isinstance(src, EventSource):
+        w, h = src.sensor_size
+        settings.update(bin_ms=f"{src.bin_ms:g}", event_threshold=f"{args.event_threshold:g}",
+                        sensor_size=f"{w}x{h}")
+    else:
+        settings["fps"] = f"{src.fps:g}"
+        if str(path).lower().endswith(".npy"):
+            settings["color_order"] = str(args.color_order)
+    if rain_params is not None:
+        settings.update(rain_drops=str(rain_params.drops_for(src.shape)), rain_seed=str(int(rain_seed)))
+    return settings
+
+
+def settings_text(settings: dict[str, str]) -> str:
+    """``NAME=VALUE;...`` of :func:`run_settings` (the ``settings`` column of summary.csv)."""
+    return ";".join(f"{k}={v}" for k, v in settings.items())
+
+
+def _settings_of_row(row: dict) -> dict[str, str]:
+    """The settings recorded in a summary row; a row written before the ``settings`` column has only its
+    frame rate (``video_fps``)."""
+    text = row.get("settings")
+    if text is None:
+        return {"fps": row["video_fps"]} if row.get("video_fps") else {}
+    return dict(item.split("=", 1) for item in str(text).split(";") if "=" in item)
+
+
+def identity_changes(old: dict, new: dict) -> list[str]:
+    """What differs between the runs of two summary rows, ``["fps 30 -> 10", "params defaults -> n_ts=3"]``.
+
+    Compares the parameters and every setting of :func:`run_settings` that either row records (a
+    setting only one row records is named with ``(not recorded)`` on the other side).
+    """
+    changes = []
+    old_params, new_params = old.get("params") or "", new.get("params") or ""
+    if old_params != new_params:
+        changes.append(f"params {old_params or 'defaults'} -> {new_params or 'defaults'}")
+    a, b = _settings_of_row(old), _settings_of_row(new)
+    for key in dict.fromkeys([*a, *b]):
+        if a.get(key) != b.get(key):
+            changes.append(f"{key} {a.get(key, '(not recorded)')} -> {b.get(key, '(not recorded)')}")
+    return changes
 
 
 def _summary_key(row: dict) -> tuple[str, str, str]:
@@ -308,7 +382,8 @@ def merge_summary(path: Path, new_rows: list[dict], write_text) -> None:
     """Merge ``new_rows`` into ``path`` (atomically), keyed by clip, model and condition.
 
     A new row replaces the earlier row of the same key (its trace file was replaced too, and a
-    note on stderr says so when the earlier one was made with other parameters); a failed input
+    note on stderr names each difference when the earlier one was made with other parameters or
+    settings: :func:`identity_changes`); a failed input
     replaces no earlier row; every other earlier row is kept, so separate runs into one folder
     add up.
     """
@@ -320,11 +395,12 @@ def merge_summary(path: Path, new_rows: list[dict], write_text) -> None:
     by_key = {_summary_key(r): r for r in new_rows}
     for r in old:
         mine = by_key.get(_summary_key(r))
-        if mine is not None and r.get("status") != "" and not str(r.get("status", "")).startswith("error") \
-                and (r.get("params") or "") != (mine.get("params") or ""):
+        if mine is None or r.get("status") == "" or str(r.get("status", "")).startswith("error"):
+            continue
+        changes = identity_changes(r, mine)
+        if changes:
             print(f"note: {path.parent / mine['trace']} replaces the trace of an earlier run made with other "
-                  f"parameters ({r.get('params') or 'defaults'} -> {mine.get('params') or 'defaults'})",
-                  file=sys.stderr)
+                  f"settings: {'; '.join(changes)}", file=sys.stderr)
     kept = [r for r in old if _summary_key(r) not in by_key]
     columns = list(SUMMARY_COLUMNS) + [c for r in kept for c in r if c not in SUMMARY_COLUMNS and c != "_i"]
     buf = io.StringIO()
@@ -336,7 +412,13 @@ def merge_summary(path: Path, new_rows: list[dict], write_text) -> None:
 
 
 def _exit_now(code: int) -> None:
-    """Flush stdout/stderr and end the process with ``code`` (no interpreter shutdown)."""
+    """Flush stdout/stderr and end the process with ``code`` (no interpreter shutdown).
+
+    The semaphores of the stopped worker pools are released first (multiprocessing's own exit
+    finalizers, which ``os._exit`` skips), so its resource tracker reports none as leaked.
+    """
+    with contextlib.suppress(Exception):
+        mp_util._run_finalizers(0)
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
@@ -374,8 +456,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     code 2; any other exception propagates with its traceback (it is a bug).
     """
     program = argv is None
-    if program:  # run as a program: a second Ctrl-C after a first one ends it at once
-        exit_on_second_interrupt(True)
+    if program:  # run as a program: a second Ctrl-C after a first one ends it at once, and one during
+        exit_on_second_interrupt(True)  # a kernel compile within seconds; SIGTERM is a first Ctrl-C
+        handle_sigterm_as_interrupt()
+        watch_interrupts()
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         lanes_override()  # a bad $CDNF_TI_LANES is one line now, not one error per clip later

@@ -27,6 +27,7 @@ itself: it adopts it.
 """
 from __future__ import annotations
 
+import atexit
 import contextlib
 import importlib
 import importlib.util
@@ -368,6 +369,179 @@ def dsl() -> ModuleType:
 
 _build_lock = threading.RLock()
 _built: dict[str, object] = {}
+#: Kernel instances compiled (or loaded from the compile cache) in this process: each first launch of
+#: a new compile signature (:func:`compiled_as`) and each kernel module built (:func:`kernels`).
+_compiles = 0
+_count_lock = threading.Lock()
+
+
+def compile_count() -> int:
+    """How many kernels this process has compiled so far (a step during which it grows compiled).
+
+    Counts each first launch of a kernel instance (:func:`compiled_as`: the compiler builds its code
+    then, or loads it from the compile cache) and each kernel module built (:func:`kernels`).
+    """
+    return _compiles
+
+
+def _count_compile(what: str = "") -> None:
+    """Count one compile; announce it (:class:`compiling`) when it is the first of its scope.
+
+    ``what``: the kernel module compiling (``"stimuli"``), named when no scope is active.
+    """
+    global _compiles
+    with _count_lock:
+        _compiles += 1
+    scope = getattr(_notice_state, "scope", None)
+    if scope is not None:
+        scope.compiled()
+    elif what and _announce(what):  # e.g. "stimuli": the generators of stim: inputs and rain (no duration line)
+        _remember(what)
+
+
+# -- compile notices -------------------------------------------------------------------------------
+# A cold compile takes seconds per kernel (tens of seconds under load): every command says so in
+# one line before it compiles for a new model or frame size, and how long it took after. A label
+# is announced once per code version and compile-cache folder (a marker file in that folder lists
+# the labels compiled there), so a run whose kernels come from the cache stays quiet.
+
+#: Environment variable: ``0`` silences the compile notices (``--no-progress``; worker processes inherit it).
+NOTICES_ENV = "CDNF_TI_COMPILE_NOTICES"
+#: The marker file, in the compile-cache folder, of the labels compiled there (one key a line).
+NOTICES_FILE = "cdnf_ti_compiled.txt"
+_notice_state = threading.local()
+_notice_lock = threading.Lock()
+_seen: set[str] | None = None  # keys of the marker file, read once per process
+_announced: set[str] = set()  # labels announced by this process
+
+
+def set_compile_notices(on: bool) -> None:
+    """Print the compile notices (default) or not (``--no-progress``), here and in child processes."""
+    os.environ[NOTICES_ENV] = "1" if on else "0"
+
+
+def compile_notices() -> bool:
+    """Whether compile notices are printed (:data:`NOTICES_ENV` is not ``0``)."""
+    return os.environ.get(NOTICES_ENV, "1").strip() != "0"
+
+
+def _notice_key(label: str) -> str:
+    """``label`` tied to what makes the compiled code: the compiler, its version, the lanes and cdnf_ti's source."""
+    from .provenance import compiler_identity, engine_settings, source_digest
+
+    ident = compiler_identity()
+    return (f"{ident['compiler']} {ident['compiler_version']} lanes={engine_settings()['lanes']} "
+            f"{source_digest()[:16]} {label}")
+
+
+def _marker() -> str:
+    return os.path.join(cache_folder(_compiler or default_compiler()), NOTICES_FILE)
+
+
+def _announce(label: str) -> bool:
+    """Print ``compiling kernels for <label>, first time only; cached in <dir>`` unless notices are off, this
+    process announced ``label`` already, or the marker file says the cache holds it. Returns whether it printed."""
+    global _seen
+    if not compile_notices():
+        return False
+    with _notice_lock:
+        if label in _announced:
+            return False
+        _announced.add(label)
+        key = _notice_key(label)
+        if _seen is None:
+            try:
+                with open(_marker(), encoding="utf-8") as f:
+                    _seen = {line.rstrip("\n") for line in f}
+            except (OSError, UnicodeDecodeError):
+                _seen = set()
+        if key in _seen:
+            return False
+    print(f"compiling kernels for {label}, first time only; cached in {os.path.dirname(_marker())}",
+          file=sys.stderr, flush=True)
+    return True
+
+
+def _remember(label: str) -> None:
+    """Add ``label`` to the marker file (the kernels it compiled are in the cache from now on)."""
+    key = _notice_key(label)
+    with _notice_lock:
+        if _seen is not None:
+            _seen.add(key)
+        try:
+            os.makedirs(os.path.dirname(_marker()), exist_ok=True)
+            with open(_marker(), "a", encoding="utf-8") as f:
+                f.write(key + "\n")
+        except OSError:  # a read-only cache: the notice shows again next time
+            pass
+
+
+#: Labels announced whose compiles may not be over: label -> [seconds of its compiling steps, quiet steps since].
+_pending: dict[str, list[float]] = {}
+#: Steps in a row that compile nothing after which a label's compiles count as over (a model compiles on
+#: its first steps: C-DNF on frame 0, the LGMD family also on frame 1, oLGMD on frame 2).
+QUIET_STEPS = 3
+
+
+class compiling:
+    """Context of one step that may compile kernels for ``label`` (``"cdnf at 432x240"``).
+
+    The first kernel compiled for a label prints ``compiling kernels for <label>, first time only; cached
+    in <dir>`` on stderr. Once :data:`QUIET_STEPS` steps of the label in a row compile nothing (or at
+    exit), ``compiled kernels for <label> in <s> s`` gives the time of its steps that compiled. Nothing is
+    printed when no kernel compiled, the label was compiled into this cache before, or notices are off
+    (:func:`set_compile_notices`).
+    """
+
+    __slots__ = ("label", "outer", "did_compile", "t0")
+
+    def __init__(self, label: str):
+        self.label = label
+        self.did_compile = False
+
+    def __enter__(self) -> "compiling":
+        self.outer = getattr(_notice_state, "scope", None)
+        _notice_state.scope = self
+        self.t0 = time.perf_counter()
+        return self
+
+    def compiled(self) -> None:
+        """A kernel compiled in this scope (the first one of its label may announce it)."""
+        if self.did_compile:
+            return
+        if self.label in _pending or (self.label not in _announced and _announce(self.label)):
+            _pending.setdefault(self.label, [0.0, 0])
+            self.did_compile = True
+
+    def __exit__(self, *exc) -> bool:
+        _notice_state.scope = self.outer
+        state = _pending.get(self.label)
+        if state is not None:
+            if self.did_compile:
+                state[0] += time.perf_counter() - self.t0
+                state[1] = 0
+            else:
+                state[1] += 1
+                if state[1] >= QUIET_STEPS:
+                    _finish(self.label)
+        return False
+
+
+def _finish(label: str) -> None:
+    """Print the duration line of ``label`` and mark its kernels as in the cache."""
+    seconds, _ = _pending.pop(label)
+    print(f"compiled kernels for {label} in {seconds:.1f} s", file=sys.stderr, flush=True)
+    _remember(label)
+
+
+@atexit.register
+def _finish_all() -> None:
+    """At exit: the duration lines of labels whose every step compiled."""
+    for label in list(_pending):
+        try:
+            _finish(label)
+        except (OSError, ValueError):  # stderr closed
+            pass
 
 
 def lanes() -> int:
@@ -396,6 +570,7 @@ def kernels(name):
             module, _, function = ("" if callable(name) else name).partition(":")
             build = name if callable(name) else getattr(importlib.import_module(f"{__package__}.kernels.{module}"),
                                                         function or "build")
+            _count_compile(name if isinstance(name, str) else getattr(name, "__module__", ""))
             got = _built[name] = build(ti, lanes())
         return got
 
@@ -490,6 +665,7 @@ def compiled_as(kernel, scalarize: bool):
     open_arrays = tuple(k for k, p in enumerate(params) if isinstance(p.annotation, ndarray)
                         and (p.annotation.dtype is None or p.annotation.ndim is None))
     compiled: set[tuple] = set()
+    module_name = str(getattr(kernel, "__module__", "") or "").rsplit(".", 1)[-1]
 
     def signature(args: tuple) -> tuple:
         return (tuple(args[k] if isinstance(args[k], (int, str)) else id(args[k]) for k in templates),
@@ -500,6 +676,7 @@ def compiled_as(kernel, scalarize: bool):
         sig = signature(args)
         if sig in compiled:
             return kernel(*args)
+        _count_compile(module_name)
         with _compile_lock:
             cfg = ti.lang.impl.current_cfg()
             before = cfg.real_matrix_scalarize

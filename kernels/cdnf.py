@@ -33,6 +33,7 @@ from types import SimpleNamespace
 from ..taichi_runtime import scalar_kernel, vector_kernel
 from . import common, schedule
 from .common import RECORD_COEFS, namespace
+from .engine import Coefs, Planes
 from .schedule import Plan, context
 
 # -- pending spans ---------------------------------------------------------------
@@ -49,21 +50,20 @@ EMPTY_LO = 1 << 30  # (EMPTY_LO, EMPTY_HI): an empty span
 EMPTY_HI = -1
 
 
-# -- the state: one stacked array per backend --------------------------------------
+# -- the state: one stacked array per backend, its planes declared by name --------------
 # Lane kernels: a lane array (LANE_PLANES, H, NB); generic kernels: float32 (PLANES, H, W), with
 # the Summation field's buffers as (H, W) arrays of their own (the DoG's input, dog_row_pass).
 # Each field keeps two ping-pong buffers, planes ``U_ON + parity`` etc.
-
-L_ = common.L_PLANE  # photoreceptors (the last frame)
-P_ = common.P_PLANE  # the luminance change P (frames), or an event bin's P_on
-P_OFF = 2  # an event bin's P_off (frames: P_on and P_off are [P]+ and [-P]+ of plane P_)
-S_ = 3  # the Summation input S
-ROW1 = 4  # the Summation DoG's row passes (ROW1, ROW1 + 1)
-U_ON, U_OFF = 6, 8  # the ON and OFF contrast fields, two buffers each
-V_ = 10  # lanes: the Summation field, two buffers
-LANE_PLANES = 12
-REST_U = 10  # generic: the resting state of a contrast field
-PLANES = 11
+#: The planes: photoreceptors ``L`` (the last frame); the luminance change ``P`` (frames), or an event
+#: bin's ``P_on`` and ``P_off`` (frames: P_on and P_off are [P]+ and [-P]+ of ``P``); the Summation input
+#: ``S``; the Summation DoG's two row passes ``ROW``; the ON and OFF contrast fields ``U_ON``, ``U_OFF``;
+#: the Summation field ``V`` (lane kernels); a contrast field's resting state ``REST`` (generic kernels).
+STATE = Planes("L P P_OFF S ROW:2 U_ON:2 U_OFF:2 V:2 REST")
+L_, P_, P_OFF, S_, ROW1 = STATE.L.slot, STATE.P.slot, STATE.P_OFF.slot, STATE.S.slot, STATE.ROW.slot
+U_ON, U_OFF, V_, REST_U = STATE.U_ON.slot, STATE.U_OFF.slot, STATE.V.slot, STATE.REST.slot
+LANE_PLANES = V_ + 2  # the lane kernels' planes (their resting state is an array of its own)
+PLANES = STATE.count
+assert (L_, P_) == (common.L_PLANE, common.P_PLANE)  # the photoreceptor stage's planes
 
 # An event bin comes as one float32 array (2, H, W), ``(p_on, p_off)``, where a frame is (H, W):
 # the kernels that take a frame switch on its dimensions at compile time (``ti.static``), and
@@ -73,15 +73,24 @@ PLANES = 11
 #: Pending spans (lane kernels): one SPANS array (4, H), the contrast group's two parities, then the Summation's.
 SPAN_C, SPAN_S = 0, 2
 
-# -- a backend's coefficients: one float32 array, set once (cdnf_ti.backends.cdnf) --
-K0, K1 = 0, 1  # W_c = k k^T, k = (k1, k0, k1): the lane kernels' separable contrast kernel
-WC0, WC1, WC2 = 2, 3, 4  # W_c's centre, edge and diagonal weights (generic kernels)
-H_REST, TAU, TOL, GROW = 5, 6, 7, 8  # h; the freezing threshold; the stopping rule (tolerance, growth)
-ALPHA_ON, ALPHA_OFF, THETA = 9, 10, 11  # the Summation input's gains; theta's scale 1 / tanh(1)
-DOG_A, DOG_B = 12, 13  # W_s = A g1 g1^T - B g2 g2^T
-LOCAL, WORKERS = 14, 15  # 1: the local start (cdnf_ti.solver); the persistent workers of a lane solve
-START_U, START_V = 16, 23  # the local starts of the contrast and Summation fields (7 each)
-TAPS = 30  # the DoG profiles g1, g2 (2 R + 1 each; generic kernels)
+# -- a backend's coefficients: one float32 array by name, set once (cdnf_ti.backends.cdnf) --
+#: ``k = (k0, k1)``: the lane kernels' separable contrast kernel ``W_c = k k^T``, ``k = (k1, k0, k1)``;
+#: ``wc``: W_c's centre, edge and diagonal weights (generic kernels); ``h``; ``tau``: the freezing
+#: threshold; ``tol``, ``grow``: the stopping rule (tolerance, growth); ``alpha_on``, ``alpha_off``: the
+#: Summation input's gains; ``theta``: theta's scale 1 / tanh(1); ``dog_a``, ``dog_b``: W_s = A g1 g1^T -
+#: B g2 g2^T; ``local``: 1 for the local start (cdnf_ti.solver); ``workers``: the persistent workers of a
+#: lane solve; ``start_u``, ``start_v``: the local starts of the contrast and Summation fields; ``taps``:
+#: the DoG profiles g1, g2 (2 R + 1 each; generic kernels).
+COEF = Coefs(k=2, wc=3, h=1, tau=1, tol=1, grow=1, alpha_on=1, alpha_off=1, theta=1, dog_a=1, dog_b=1,
+             local=1, workers=1, start_u=7, start_v=7, taps=0)
+K0, K1 = COEF.k.slot, COEF.k.slot + 1
+WC0, WC1, WC2 = COEF.wc.slot, COEF.wc.slot + 1, COEF.wc.slot + 2
+H_REST, TAU, TOL, GROW = COEF.h.slot, COEF.tau.slot, COEF.tol.slot, COEF.grow.slot
+ALPHA_ON, ALPHA_OFF, THETA = COEF.alpha_on.slot, COEF.alpha_off.slot, COEF.theta.slot
+DOG_A, DOG_B = COEF.dog_a.slot, COEF.dog_b.slot
+LOCAL, WORKERS = COEF.local.slot, COEF.workers.slot
+START_U, START_V = COEF.start_u.slot, COEF.start_v.slot
+TAPS = COEF.taps.slot
 
 #: A lane contrast launch's values (its record's row 0, from ``LaunchRecord.values_at``): the buffer
 #: parities of the contrast and Summation fields, updates at most, whether to load a frame, whether

@@ -94,7 +94,7 @@ class Coef:
 
 
 class Coefs(_Names):
-    """The coefficients of a model by name and size: ``Coefs(k_on=6, a1=1)``."""
+    """The coefficients of a model by name and size: ``Coefs(k_on=6, a1=1)``; size 0 (last only): any length."""
 
     def __init__(self, **sizes: int):
         items, slot = {}, 0
@@ -124,7 +124,7 @@ def coefficient_array(coefs: Coefs, values: dict) -> "list[float]":
     for c in coefs:
         v = values[c.name]
         v = list(v) if hasattr(v, "__len__") else [v]
-        if len(v) != c.size:
+        if len(v) != c.size and not (c.size == 0 and c is list(coefs)[-1]):  # size 0, last: any length
             raise ValueError(f"coefficient {c.name}: {c.size} values, got {len(v)}")
         out += [float(x) for x in v]
     return out or [0.0]
@@ -219,13 +219,13 @@ def build(ti, lanes: int) -> SimpleNamespace:
     F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 
     @ti.func
-    def _index(ctx: ti.template(), plane: ti.template()):
-        """The slot of ``plane`` (a pair's buffer by the parity ``ctx.c``)."""
+    def _index(c, plane: ti.template()):
+        """The slot of ``plane`` (a pair's buffer by the parity ``c``)."""
         k = plane.slot
         if ti.static(plane.buffers == 2 and plane.side == 0):
-            k = plane.slot + ctx.c
+            k = plane.slot + c
         elif ti.static(plane.buffers == 2):
-            k = plane.slot + 1 - ctx.c
+            k = plane.slot + 1 - c
         return k
 
     @ti.func
@@ -238,56 +238,48 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
     # -- the lane layout: element (k, i, e) holds the columns (e - 1) LANES .. e LANES - 1 of row i -------
     @ti.func
-    def _lane_at(a: ti.template(), plane: ti.template(), di: ti.template(), dj: ti.template()):
-        x = ti.static(a.ctx.x)
-        k = _index(a.ctx, plane)
-        mode = ti.static(a.ctx.spec.border(plane)[0])
-        r = a.i
+    def _lane_at(x: ti.template(), k, i, e, mode: ti.template(), di: ti.template(), dj: ti.template()):
+        r = i
         if ti.static(di != 0):
-            r = C.border_index(a.i + di, x.shape[1], mode)
-        v = x[k, r, a.j]
+            r = C.border_index(i + di, x.shape[1], mode)
+        v = x[k, r, e]
         if ti.static(dj != 0):
-            v = C.lane_shift(x[k, r, a.j - 1], x[k, r, a.j], x[k, r, a.j + 1], dj)
+            v = C.lane_shift(x[k, r, e - 1], x[k, r, e], x[k, r, e + 1], dj)
         if ti.static(mode == ZERO and di != 0):
-            v = v * C.border_weight(a.i + di, x.shape[1], mode)
+            v = v * C.border_weight(i + di, x.shape[1], mode)
         return v
 
     @ti.func
-    def _lane_window3(a: ti.template(), plane: ti.template()):
-        H = a.ctx.x.shape[1]
-        im, ip = _rows(a.i, H, ti.static(a.ctx.spec.border(plane)[0]))
-        return C.lane_edge_diag(a.ctx.x, _index(a.ctx, plane), im, a.i, ip, a.j)
+    def _lane_window3(x: ti.template(), k, i, e, mode: ti.template()):
+        im, ip = _rows(i, x.shape[1], mode)
+        return C.lane_edge_diag(x, k, im, i, ip, e)
 
     @ti.func
-    def _lane_put(a: ti.template(), plane: ti.template(), v):
-        mode, ring = ti.static(a.ctx.spec.border(plane))
+    def _lane_put(x: ti.template(), k, i, e, v, ring: ti.template(), W: ti.template()):
         if ti.static(ring):
-            v = v * _lane_inside(a)
-        a.ctx.x[_index(a.ctx, plane), a.i, a.j] = v
+            v = v * _lane_inside(i, e, x.shape[1], W)
+        x[k, i, e] = v
 
     @ti.func
-    def _lane_inside(a: ti.template()):
-        """1.0 on the lanes off the frame's outermost ring, else 0.0."""
-        W = ti.static(a.ctx.spec.W)
+    def _lane_inside(i, e, H, W: ti.template()):
+        """1.0 on the lanes of element ``(i, e)`` off the frame's outermost ring, else 0.0."""
         m = ti.Vector([0.0] * LANES, dt=ti.f32)
-        row = (a.i > 0) & (a.i < a.ctx.x.shape[1] - 1)
+        row = (i > 0) & (i < H - 1)
         for q in ti.static(range(LANES)):
-            col = (a.j - 1) * LANES + q
+            col = (e - 1) * LANES + q
             m[q] = ti.select(row & (col >= 1) & (col <= W - 2), 1.0, 0.0)
         return m
 
     @ti.func
-    def _lane_input(a: ti.template(), plane: ti.template()):
-        """The input's columns of this element (plane ``plane`` of an event bin; past W - 1: the last one)."""
-        W = ti.static(a.ctx.spec.W)
-        frame = ti.static(a.ctx.frame)
+    def _lane_input(frame: ti.template(), i, e, plane: ti.template(), W: ti.template()):
+        """The input's columns of element ``(i, e)`` (plane ``plane`` of an event bin; past W - 1: the last)."""
         g = ti.Vector([0.0] * LANES, dt=ti.f32)
         for q in ti.static(range(LANES)):
-            jj = ti.min((a.j - 1) * LANES + q, W - 1)
+            jj = ti.min((e - 1) * LANES + q, W - 1)
             if ti.static(len(frame.shape) == 3):
-                g[q] = ti.cast(frame[plane, a.i, jj], ti.f32)
+                g[q] = ti.cast(frame[plane, i, jj], ti.f32)
             else:
-                g[q] = ti.cast(frame[a.i, jj], ti.f32)
+                g[q] = ti.cast(frame[i, jj], ti.f32)
         return g
 
     @ti.func
@@ -310,45 +302,40 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
     # -- the pixel layout: (planes, H, W) arrays, one pixel per cell ---------------------------------
     @ti.func
-    def _pixel_at(a: ti.template(), plane: ti.template(), di: ti.template(), dj: ti.template()):
-        x = ti.static(a.ctx.x)
-        k = _index(a.ctx, plane)
-        mode = ti.static(a.ctx.spec.border(plane)[0])
+    def _pixel_at(x: ti.template(), k, i, j, mode: ti.template(), di: ti.template(), dj: ti.template()):
         H, W = x.shape[1], x.shape[2]
-        r, s = a.i, a.j
+        r, s = i, j
         if ti.static(di != 0):
-            r = C.border_index(a.i + di, H, mode)
+            r = C.border_index(i + di, H, mode)
         if ti.static(dj != 0):
-            s = C.border_index(a.j + dj, W, mode)
+            s = C.border_index(j + dj, W, mode)
         v = x[k, r, s]
         if ti.static(mode == ZERO and (di != 0 or dj != 0)):
-            v = v * C.border_weight(a.i + di, H, mode) * C.border_weight(a.j + dj, W, mode)
+            v = v * C.border_weight(i + di, H, mode) * C.border_weight(j + dj, W, mode)
         return v
 
     @ti.func
-    def _pixel_window3(a: ti.template(), plane: ti.template()):
-        v = _pixel_at(a, plane, -1, 0) + _pixel_at(a, plane, 1, 0)
-        edge = v + _pixel_at(a, plane, 0, -1) + _pixel_at(a, plane, 0, 1)
-        diag = (_pixel_at(a, plane, -1, -1) + _pixel_at(a, plane, 1, -1)) + (
-            _pixel_at(a, plane, -1, 1) + _pixel_at(a, plane, 1, 1))
-        return _pixel_at(a, plane, 0, 0), edge, diag
+    def _pixel_window3(x: ti.template(), k, i, j, mode: ti.template()):
+        v = _pixel_at(x, k, i, j, mode, -1, 0) + _pixel_at(x, k, i, j, mode, 1, 0)
+        edge = v + _pixel_at(x, k, i, j, mode, 0, -1) + _pixel_at(x, k, i, j, mode, 0, 1)
+        diag = (_pixel_at(x, k, i, j, mode, -1, -1) + _pixel_at(x, k, i, j, mode, 1, -1)) + (
+            _pixel_at(x, k, i, j, mode, -1, 1) + _pixel_at(x, k, i, j, mode, 1, 1))
+        return _pixel_at(x, k, i, j, mode, 0, 0), edge, diag
 
     @ti.func
-    def _pixel_put(a: ti.template(), plane: ti.template(), v):
-        mode, ring = ti.static(a.ctx.spec.border(plane))
+    def _pixel_put(x: ti.template(), k, i, j, v, ring: ti.template()):
         if ti.static(ring):
-            H, W = a.ctx.x.shape[1], a.ctx.x.shape[2]
-            v = v * ti.select((a.i > 0) & (a.i < H - 1) & (a.j > 0) & (a.j < W - 1), 1.0, 0.0)
-        a.ctx.x[_index(a.ctx, plane), a.i, a.j] = v
+            H, W = x.shape[1], x.shape[2]
+            v = v * ti.select((i > 0) & (i < H - 1) & (j > 0) & (j < W - 1), 1.0, 0.0)
+        x[k, i, j] = v
 
     @ti.func
-    def _pixel_input(a: ti.template(), plane: ti.template()):
-        frame = ti.static(a.ctx.frame)
+    def _pixel_input(frame: ti.template(), i, j, plane: ti.template()):
         g = ti.f32(0.0)
         if ti.static(len(frame.shape) == 3):
-            g = ti.cast(frame[plane, a.i, a.j], ti.f32)
+            g = ti.cast(frame[plane, i, j], ti.f32)
         else:
-            g = ti.cast(frame[a.i, a.j], ti.f32)
+            g = ti.cast(frame[i, j], ti.f32)
         return g
 
     def _dsl(method):
@@ -359,77 +346,99 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
     class Cell:
         """What a stage sees of one cell: a lane vector of columns (element ``j``) or one pixel (column
-        ``j``) of row ``i``. Its methods are the stages' vocabulary (module docstring)."""
+        ``j``) of row ``i``. Its methods are the stages' vocabulary (module docstring). Its members are
+        the launch's arrays, the pairs' parity, the position, the first result and the update; the
+        compile-time choices (:class:`Layout`) are its class's ``spec``, not a member."""
 
-        __slots__ = ("ctx", "i", "j", "got", "step")
+        __slots__ = ("x", "coefs", "fr", "frame", "rec", "c", "i", "j", "got", "step")
+        spec: Layout
+        _is_taichi_function = _is_quadrants_function = False  # made while a stage compiles (see _dsl)
 
         def __init__(self, ctx, i, j, got=(), step=0):
-            self.ctx, self.i, self.j, self.got = ctx, i, j, got  # got: the first result, read once per rows
+            self.x, self.coefs, self.fr, self.frame, self.rec = ctx.x, ctx.coef, ctx.fr, ctx.frame, ctx.rec
+            self.c = ctx.c
+            self.i, self.j, self.got = i, j, got  # got: the first result, read once per chunk of rows
             self.step = step  # the update of a solve
+
         @property
         def lane(self) -> bool:
-            return self.ctx.spec.lane
+            return self.spec.lane
 
         @property
         def events(self) -> bool:
             """Whether the launch's input is an event bin (2, H, W) of ``(p_on, p_off)``."""
-            return len(self.ctx.frame.shape) == 3
+            return len(self.frame.shape) == 3
+
+        def _k(self, plane):
+            return _index(self.c, plane)
 
         @_dsl
         def at(self, plane, di=0, dj=0):
             """``plane`` at row offset ``di`` and column offset ``dj`` (its border outside the frame)."""
-            return (_lane_at if self.lane else _pixel_at)(self, plane, di, dj)
+            mode = self.spec.border(plane)[0]
+            return (_lane_at if self.lane else _pixel_at)(self.x, self._k(plane), self.i, self.j, mode, di, dj)
 
         @_dsl
         def window3(self, plane):
             """``(centre, edge sum, diagonal sum)`` of the 3x3 window of ``plane``."""
-            return (_lane_window3 if self.lane else _pixel_window3)(self, plane)
+            mode = self.spec.border(plane)[0]
+            return (_lane_window3 if self.lane else _pixel_window3)(self.x, self._k(plane), self.i, self.j, mode)
 
         @_dsl
         def put(self, plane, value):
             """Write ``value`` to ``plane`` here (0 on the outermost ring of a plane with the zero ring)."""
-            (_lane_put if self.lane else _pixel_put)(self, plane, value)
+            ring = self.spec.border(plane)[1]
+            if self.lane:
+                _lane_put(self.x, self._k(plane), self.i, self.j, value, ring, self.spec.W)
+            else:
+                _pixel_put(self.x, self._k(plane), self.i, self.j, value, ring)
 
         @_dsl
         def coef(self, c, k=0):
             """Value ``k`` of the coefficient ``c``."""
-            return _read(self.ctx.coef, c.slot + k)
+            return _read(self.coefs, c.slot + k)
 
         @_dsl
         def value(self, s):
             """The launch scalar ``s``."""
-            return _read(self.ctx.fr, s.slot)
+            return _read(self.fr, s.slot)
 
         @_dsl
         def option(self, name: str):
             """The model's compile-time option ``name`` (a Python value: use it in ``ti.static``)."""
-            return self.ctx.spec.options[name]
+            return self.spec.options[name]
 
         @_dsl
         def grey(self):
             """The input frame here (float32, as stored: grey levels or [0, 1])."""
-            return (_lane_input if self.lane else _pixel_input)(self, 0)
+            return self.event(0)
 
         @_dsl
         def event(self, polarity: int):
             """Plane ``polarity`` (0: ON, 1: OFF) of an event bin here."""
-            return (_lane_input if self.lane else _pixel_input)(self, polarity)
+            if self.lane:
+                return _lane_input(self.frame, self.i, self.j, polarity, self.spec.W)
+            return _pixel_input(self.frame, self.i, self.j, polarity)
 
         @_dsl
         def record(self, k: int):
             """Column ``k`` of this update's row of the launch record (a solve's per-update coefficients)."""
-            return _read2(self.ctx.rec, self.step, k)
+            return _read2(self.rec, self.step, k)
 
         @_dsl
         def result(self, name: str):
             """An earlier stage's reduction ``name`` in this launch (float64)."""
-            k = self.ctx.spec.launch.slot(name)
+            k = self.spec.launch.slot(name)
             return self.got[k] if k < len(self.got) else _read(res, k)
 
         @_dsl
         def zeros(self):
             """A zero value of the cell's type."""
             return _lane_zeros() if self.lane else _pixel_zeros()
+
+    def _cell_class(spec: Layout):
+        """The cells of one kernel: :class:`Cell` with that kernel's compile-time choices."""
+        return type("Cell", (Cell,), {"__slots__": (), "spec": spec})
 
     # -- the row iterator: a stage on rows [i0, i1), reduced -----------------------------------------
     @ti.func
@@ -469,21 +478,21 @@ def build(ti, lanes: int) -> SimpleNamespace:
             for i in range(i0, i1):
                 for e in range(1, (LANES + W - 1) // LANES + 1):
                     if ti.static(stage.residuals == 1):
-                        m0 = ti.max(m0, stage.fn(Cell(ctx, i, e, (p0,), j)) * C.lane_mask(e, W))
+                        m0 = ti.max(m0, stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j)) * C.lane_mask(e, W))
                     elif ti.static(stage.residuals == 2):
-                        q0, q1 = stage.fn(Cell(ctx, i, e, (p0,), j))
+                        q0, q1 = stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j))
                         m0 = ti.max(m0, q0 * C.lane_mask(e, W))
                         m1 = ti.max(m1, q1 * C.lane_mask(e, W))
                     elif ti.static(n == 0):
-                        stage.fn(Cell(ctx, i, e, (p0,), j))
+                        stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j))
                     elif ti.static(n == 1):
-                        a0 = _combine(a0, _reduce_lane(stage.fn(Cell(ctx, i, e, (p0,), j)), e, W, kind), kind)
+                        a0 = _combine(a0, _reduce_lane(stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j)), e, W, kind), kind)
                     else:
-                        r0, r1 = stage.fn(Cell(ctx, i, e, (p0,), j))
+                        r0, r1 = stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j))
                         a0 = _combine(a0, _reduce_lane(r0, e, W, kind), kind)
                         a1 = _combine(a1, _reduce_lane(r1, e, W, kind), kind)
                 for g in ti.static(stage.ghosts):
-                    C.fill_ghosts(ctx.x, _index(ctx, g), i, 1, 1, W, ti.static(ctx.spec.halo(stage)),
+                    C.fill_ghosts(ctx.x, _index(ctx.c, g), i, 1, 1, W, ti.static(ctx.spec.halo(stage)),
                                   ti.static(ctx.spec.border(g)[0]))
             if ti.static(stage.residuals >= 1):
                 ti.atomic_max(sched.rbuf[j, 0], run_max(m0, LANES))
@@ -503,18 +512,18 @@ def build(ti, lanes: int) -> SimpleNamespace:
         n = ti.static(len(stage.results))
         for i, j in ti.ndrange(ctx.x.shape[1], ctx.x.shape[2]):
             if ti.static(stage.residuals == 1):
-                ti.atomic_max(ctx.rec[step, 2], stage.fn(Cell(ctx, i, j, (), step)))
+                ti.atomic_max(ctx.rec[step, 2], stage.fn(ctx.spec.cell(ctx, i, j, (), step)))
             elif ti.static(stage.residuals == 2):
-                q0, q1 = stage.fn(Cell(ctx, i, j, (), step))
+                q0, q1 = stage.fn(ctx.spec.cell(ctx, i, j, (), step))
                 ti.atomic_max(ctx.rec[step, 2], q0)
                 ti.atomic_max(ctx.rec[step, 3], q1)
             elif ti.static(n == 0):
-                stage.fn(Cell(ctx, i, j))
+                stage.fn(ctx.spec.cell(ctx, i, j))
             elif ti.static(n == 1):
-                _publish(ti.static(ctx.spec.launch.slot(stage.results[0])), ti.cast(stage.fn(Cell(ctx, i, j)),
+                _publish(ti.static(ctx.spec.launch.slot(stage.results[0])), ti.cast(stage.fn(ctx.spec.cell(ctx, i, j)),
                                                                                    ti.f64), stage.kind)
             else:
-                r0, r1 = stage.fn(Cell(ctx, i, j))
+                r0, r1 = stage.fn(ctx.spec.cell(ctx, i, j))
                 _publish(ti.static(ctx.spec.launch.slot(stage.results[0])), ti.cast(r0, ti.f64), stage.kind)
                 _publish(ti.static(ctx.spec.launch.slot(stage.results[1])), ti.cast(r1, ti.f64), stage.kind)
 
@@ -561,6 +570,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
         ``"after"``: the stages it runs) and ``step`` (the update): the backend runs a solve's updates one
         launch each."""
         spec = Layout(launch, lane, W, modes, options)
+        spec.cell = _cell_class(spec)
         if lane:
             run_plan = workers(Plan(before=tuple(_row_stage(s) for s in launch.before),
                                     update=tuple(_row_stage(s) for s in launch.update),
@@ -588,8 +598,8 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
         return scalar_kernel(run_pixels)
 
-    return SimpleNamespace(kernel=kernel, Cell=Cell, res=res, LANES=LANES, REPLICATE=REPLICATE, REFLECT=REFLECT,
-                           ZERO=ZERO)
+    return SimpleNamespace(ti=ti, kernel=kernel, Cell=Cell, res=res, LANES=LANES, REPLICATE=REPLICATE,
+                           REFLECT=REFLECT, ZERO=ZERO)
 
 
 def model(planes: Planes, coefs: Coefs, scalars: Scalars, engine_ns: SimpleNamespace, *launches: Launch,

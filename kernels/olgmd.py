@@ -26,6 +26,8 @@ COEFS = Coefs(k_on=6, k_off=6, a1=1, o=3, cw=1, delta_c=1, cde=1, tde=1)
 SCALARS = Scalars("scale active a_1 a_2 w1 w2 gate_on gate_off prev_on prev_off")
 L, P, ON, OFF, S, Ce, G = PLANES
 K, V = COEFS, SCALARS
+#: Each channel's weights, bias and weight of ``E(t-1)``.
+CHANNELS = {"ON": (K.k_on, V.w1, V.prev_on), "OFF": (K.k_off, V.w2, V.prev_off)}
 
 
 @functools.lru_cache(maxsize=None)
@@ -58,20 +60,22 @@ def build(ti, lanes: int) -> SimpleNamespace:
         return on, off
 
     @ti.func
-    def inhibition(a: ti.template(), now_c, now_e, now_d, b_c, b_e, b_d, k: ti.template(), prev):
+    def inhibition(coefs: ti.template(), k: ti.template(), now_c, now_e, now_d, b_c, b_e, b_d, prev):
         """``I = sum_ij K_ij (a_ij E + (1 - a_ij) E(t-1))`` from the centre, edge and diagonal sums of ``E``
-        and ``E(t-1)``; ``prev`` weighs ``E(t-1)``."""
-        return (a.coef(k, 0) * now_c + a.coef(k, 1) * now_e + a.coef(k, 2) * now_d
-                + prev * (a.coef(k, 3) * b_c + a.coef(k, 4) * b_e + a.coef(k, 5) * b_d))
+        and ``E(t-1)`` (``coefs``: the coefficient array, ``k`` the channel's weights); ``prev`` weighs ``E(t-1)``."""
+        return (coefs[k.slot] * now_c + coefs[k.slot + 1] * now_e + coefs[k.slot + 2] * now_d
+                + prev * (coefs[k.slot + 3] * b_c + coefs[k.slot + 4] * b_e + coefs[k.slot + 5] * b_d))
 
     @ti.func
-    def channel(a: ti.template(), e: ti.template(), k: ti.template(), w, prev):
+    def channel(a: ti.template(), e: ti.template()):
         """``[E - w I]^+`` of the channel ``e`` (``E(t-1)`` not read while its weight ``prev`` is 0)."""
+        k, w_at, prev_at = ti.static(CHANNELS[e.name])
+        w, prev = a.value(w_at), a.value(prev_at)
         c, ed, d = a.window3(e.now)
-        inh = inhibition(a, c, ed, d, c, ed, d, k, 0.0)
+        inh = inhibition(a.coefs, k, c, ed, d, c, ed, d, 0.0)
         if prev != 0.0:
             bc, be, bd = a.window3(e.before)
-            inh = inhibition(a, c, ed, d, bc, be, bd, k, prev)
+            inh = inhibition(a.coefs, k, c, ed, d, bc, be, bd, prev)
         return ti.max(c - w * inh, 0.0)
 
     @ti.func
@@ -79,9 +83,9 @@ def build(ti, lanes: int) -> SimpleNamespace:
         """``S = o1 S_on + o2 S_off + o3 S_on S_off`` of the gated channels."""
         s_on, s_off = a.zeros(), a.zeros()
         if a.value(V.gate_on) > 0.0:
-            s_on = channel(a, ON, K.k_on, a.value(V.w1), a.value(V.prev_on))
+            s_on = channel(a, ON)
         if a.value(V.gate_off) > 0.0:
-            s_off = channel(a, OFF, K.k_off, a.value(V.w2), a.value(V.prev_off))
+            s_off = channel(a, OFF)
         a.put(S, a.coef(K.o, 0) * s_on + a.coef(K.o, 1) * s_off + a.coef(K.o, 2) * s_on * s_off)
 
     @ti.func

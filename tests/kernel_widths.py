@@ -27,7 +27,7 @@ def leaves(value) -> int:
         return sum(leaves(v) for v in vars(value).values())
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         return sum(leaves(getattr(value, f.name)) for f in dataclasses.fields(value))
-    slots = getattr(type(value), "__slots__", ())
+    slots = [s for cls in type(value).__mro__ for s in getattr(cls, "__slots__", ())]
     if slots and not isinstance(value, type):  # an object of named members (the engine's cell accessor)
         return sum(leaves(getattr(value, s)) for s in slots)
     return 1

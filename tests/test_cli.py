@@ -89,7 +89,7 @@ def test_module_entry_point_exits_2_without_traceback_on_bad_input(tmp_path):
     corrupt = tmp_path / "corrupt.mp4"
     corrupt.write_bytes(b"not a video at all" * 50)
     proc = subprocess.run([sys.executable, "-m", "cdnf_ti.run", str(corrupt), "--out", str(tmp_path / "o")],
-                          capture_output=True, text=True, timeout=120)
+                          capture_output=True, text=True)
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
     err_lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("error:")]
@@ -102,7 +102,7 @@ def test_unavailable_gpu_arch_is_a_clear_error_with_exit_code_2(looming_npy, tmp
     if shutil.which("nvidia-smi"):
         pytest.skip("a CUDA device is present here; the error path cannot be exercised")
     proc = subprocess.run([sys.executable, "-m", "cdnf_ti.run", str(looming_npy), "--arch", "cuda",
-                           "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=120)
+                           "--out", str(tmp_path / "o")], capture_output=True, text=True)
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
     assert "'cuda' is not available" in proc.stderr

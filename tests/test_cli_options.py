@@ -176,12 +176,12 @@ def test_run_line_names_the_rule_and_the_peak(looming_npy, tmp_path, capsys):
 
 
 def test_a_peak_short_of_the_level_says_how_far(capsys):
-    from cdnf_ti.alert_rule import alert_summary
+    from cdnf_ti.alert_rule import AlertRule, alert_summary
     from cdnf_ti.models.base import Trace
 
     n = 4
     tr = Trace("cdnf", "I_v", 0.506, np.array([0.5, 0.502, 0.504, 0.501]), np.zeros(n, bool), np.ones(n, bool), {})
-    s = alert_summary(tr, fps=30)
+    s = alert_summary(tr, AlertRule("I_v > 0.506", "I_v", "I_v", 0.506, strict=True), fps=30)
     assert not s.reached and s.first_alert is None
     assert s.text() == "max I_v 0.5040, alert when I_v > 0.506, 0.0020 short"
 
@@ -361,3 +361,19 @@ def test_rain_options_without_rain_get_a_note(looming_npy, tmp_path, capsys):
     assert main([str(looming_npy), "--rain-drops", "20", "--out", str(tmp_path / "o"), "--no-progress"]) == 0
     assert "note: --rain-drops changes nothing without --rain" in capsys.readouterr().err
     assert [r["condition"] for r in _summary(tmp_path / "o")] == ["clean"]
+
+
+@pytest.mark.parametrize("command", [[], ["dataset"]], ids=["run", "dataset"])
+def test_a_wrong_rain_word_lists_the_valid_choices(command, looming_npy, tmp_path, capsys):
+    target = [str(tmp_path)] if command else [str(looming_npy)]
+    with pytest.raises(SystemExit) as e:
+        main(command + target + ["--rain", "maybe", "--out", str(tmp_path / "o")])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("error:") == 1 and "'maybe'" in err and "on, off, both" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_rain_before_an_input_file_is_still_the_flag(looming_npy, tmp_path, capsys):
+    assert main(["--rain", str(looming_npy), "--backend", "numpy", "--out", str(tmp_path / "o"), "--no-progress"]) == 0
+    assert (tmp_path / "o" / "looming.cdnf.rain.csv").exists()

@@ -3,19 +3,19 @@
 Each test runs the construct a workaround replaces, in a child process (a bug may abort it),
 under the session's compiler, and asserts what a correct compiler does. Where the installed
 compiler version is known to have the bug the test is a strict xfail: it fails loudly once
-the compiler is fixed, so the workaround can go.
+the compiler is fixed, so the workaround can go. A bug that shows only on some machines (the GPU
+probe crashes only where no GPU device is found) is tested only where the test sees that machine.
 """
 from __future__ import annotations
 
 import importlib.metadata
 import os
-import shutil
 import subprocess
 import sys
 
 import pytest
 
-from cdnf_ti.taichi_runtime import COMPILER_ENV, current_compiler, default_compiler
+from cdnf_ti.taichi_runtime import COMPILER_ENV, BackendUnavailableError, check_arch, current_compiler, default_compiler
 
 COMPILER = current_compiler() or default_compiler()
 VERSION = importlib.metadata.version(COMPILER)
@@ -71,9 +71,10 @@ print("RESULT", bool(np.array_equal(y.to_numpy(), {want})))
 """
 
 
-def _child(code: str, timeout: float = 300) -> subprocess.CompletedProcess:
+def _child(code: str) -> subprocess.CompletedProcess:
+    """Run ``code`` in a child process under the session's compiler, however long it takes."""
     env = dict(os.environ, **{COMPILER_ENV: COMPILER})
-    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout, env=env)
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
 
 
 def _result(proc: subprocess.CompletedProcess) -> str | None:
@@ -130,10 +131,28 @@ print("RESULT", "returned")
 """
 
 
-@pytest.mark.skipif(bool(shutil.which("nvidia-smi")) or os.path.exists("/dev/nvidia0"),
-                    reason="this machine has a GPU: asking for one says nothing about a machine without")
+def _gpu_devices() -> list[str]:
+    """The GPU backends the session's compiler finds on this machine (each probed in a child process).
+
+    A software driver counts: Mesa's Vulkan driver (lavapipe, installed with Debian's chromium and
+    ffmpeg) gives a Vulkan device, and the compiler then starts on it without reaching the probe
+    that crashes.
+    """
+    found = []
+    for arch in ("cuda", "vulkan"):
+        try:
+            found.append(check_arch(arch, timeout=None))  # no time limit: a loaded machine is slow, not GPU-less
+        except BackendUnavailableError:
+            pass
+    return found
+
+
 @broken("gpu_probe")
 def test_asking_for_a_gpu_where_there_is_none_does_not_crash_the_process():
     # taichi_runtime.check_arch probes a GPU arch in a child process for this
-    proc = _child(_GPU_INIT.format(compiler=COMPILER), timeout=120)
+    devices = _gpu_devices()
+    if devices:
+        pytest.skip(f"this machine has a GPU device ({', '.join(devices)}): asking for one says nothing about "
+                    "a machine without")
+    proc = _child(_GPU_INIT.format(compiler=COMPILER))
     assert proc.returncode == 0 and _result(proc) == "returned", (proc.returncode, proc.stderr[-500:])

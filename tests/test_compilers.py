@@ -22,10 +22,10 @@ from cdnf_ti.taichi_runtime import (
 REPO = Path(__file__).resolve().parents[1]
 
 
-def _run(args, compiler, timeout=900, code=None):
+def _run(args, compiler, code=None):
     env = dict(os.environ, **{COMPILER_ENV: compiler})
     cmd = [sys.executable, "-c", code] if code is not None else [sys.executable, "-m", "cdnf_ti.run", *args]
-    return subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=timeout)
+    return subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True)
 
 
 def test_the_process_runs_the_compiler_it_was_asked_for():
@@ -110,7 +110,8 @@ def test_kernel_modules_are_built_for_the_runtimes_dsl():
     for mod in (cdnf, common, lgmd, sdnf, stimuli):
         name = mod.__name__.rsplit(".", 1)[1]
         built = kernels(name)
-        assert built.ti is dsl() and kernels(name) is built  # built once per process
+        dsl_of = built.engine.ti if hasattr(built, "engine") else built.ti  # a model on the engine core: its engine's
+        assert dsl_of is dsl() and kernels(name) is built  # built once per process
     assert np.isfinite(float(common.MAX_STEPS))  # the constants need no compiler
 
 
@@ -123,8 +124,7 @@ def test_limit_cpu_threads_sizes_the_pool_under_each_compiler(compiler):
             "limit_cpu_threads(3)\nensure_taichi('cpu')\nprint(cpu_threads())")
     env = {k: v for k, v in os.environ.items() if k not in THREADS_ENV}
     env[COMPILER_ENV] = compiler
-    proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True,
-                          timeout=300)
+    proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert proc.stdout.split()[-1] == "3"
 
@@ -209,7 +209,7 @@ def test_another_taichi_program_with_a_small_cache_evicts_none_of_cdnf_tis_kerne
     for name, code in (("ours.py", ours), ("other.py", other), ("other.py", other)):  # kernels need a file
         (tmp_path / name).write_text(code)
         proc = subprocess.run([sys.executable, str(tmp_path / name)], cwd=REPO, env=env, capture_output=True,
-                              text=True, timeout=300)
+                              text=True)
         assert proc.returncode == 0, proc.stderr[-2000:]
         if code is ours:
             kept = files(folder)
@@ -227,8 +227,7 @@ def test_the_lane_width_of_the_fast_path_suits_the_compiler(compiler):
             "print(kernels('common').LANES, kernels('cdnf').LANES, kernels('lgmd').LANES)")
     env = dict(os.environ, **{COMPILER_ENV: compiler})
     env.pop(LANES_ENV, None)
-    proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True,
-                          timeout=300)
+    proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr[-2000:]
     want = {"taichi": 32, "quadrants": 32}[compiler]
     assert proc.stdout.split()[-3:] == [str(want)] * 3
@@ -251,8 +250,7 @@ print(kernels('common').LANES, isinstance(fast._be, LaneTaichiCDNFBackend), np.m
 def test_the_lane_count_can_be_set_for_another_cpu_and_gives_the_same_output():
     compiler = current_compiler()
     env = dict(os.environ, **{COMPILER_ENV: compiler, LANES_ENV: "8"})  # not the default of either compiler
-    proc = subprocess.run([sys.executable, "-c", _LANES_CHILD], cwd=REPO, env=env, capture_output=True, text=True,
-                          timeout=600)
+    proc = subprocess.run([sys.executable, "-c", _LANES_CHILD], cwd=REPO, env=env, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr[-2000:]
     lanes, lane_path, max_diff = proc.stdout.split()[-3:]
     assert (lanes, lane_path) == ("8", "True")
@@ -262,7 +260,7 @@ def test_the_lane_count_can_be_set_for_another_cpu_and_gives_the_same_output():
 def test_an_unsupported_lane_count_is_a_one_line_error(tmp_path):
     env = dict(os.environ, **{LANES_ENV: "12"})
     proc = subprocess.run([sys.executable, "-m", "cdnf_ti.run", "demo", "--size", "64"], cwd=tmp_path, env=env,
-                          capture_output=True, text=True, timeout=300)
+                          capture_output=True, text=True)
     assert proc.returncode == 2
     assert proc.stderr.startswith(f"error: ${LANES_ENV}='12':") and proc.stderr.count("\n") == 1
 

@@ -58,7 +58,7 @@ def _widths() -> dict[str, int]:
     import sys
 
     proc = subprocess.run([sys.executable, str(ROOT / "tests" / "kernel_widths.py")], capture_output=True, text=True,
-                          timeout=900, cwd=ROOT)
+                          cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout[proc.stdout.index("{"):])
 
@@ -67,7 +67,7 @@ def test_no_kernel_or_func_is_called_with_more_than_twelve_parameters_counting_t
     widths = _widths()
     # the count covers the lane solves and the generic kernels of every model (not a vacuous pass)
     assert {"cdnf.py:lanes_contrast_solve", "cdnf.py:contrast_solve", "lgmd.py:update",
-            "lgmd.py:summation", "sdnf.py:field_update", "engine.py:run_lanes", "engine.py:run_pixels",
+            "lgmd.py:summation", "sdnf.py:field", "engine.py:run_lanes", "engine.py:run_pixels",
             "olgmd.py:photoreceptors", "olgmd.py:summation",
             "lplc2.py:lanes_arms"} <= set(widths)
     assert {k: v for k, v in widths.items() if v > 12} == {}

@@ -90,3 +90,39 @@ def test_info_on_a_folder_reports_every_recording_in_it(tmp_path, capsys):
     assert main(["events", "--info", str(tmp_path), "--sensor-size", "64x48"]) == 0
     out = capsys.readouterr().out
     assert out.count(": npy, 64x48 (--sensor-size)") == 2 and "frames.npy" not in out
+
+
+def test_events_progress_in_a_log_is_one_line_per_input(tmp_path, capsys):
+    """stderr is not a terminal here (captured): no carriage-return bar, one line per input as the other commands."""
+    assert main(["events", STIM, "stim:light_looming?size=48&duration=0.5", "--out", str(tmp_path / "ev")]) == 0
+    err = capsys.readouterr().err
+    assert "\r" not in err
+    lines = [ln for ln in err.splitlines() if ln.startswith("[")]
+    assert [ln.split("]")[0] for ln in lines] == ["[1/2", "[2/2"]
+    assert "dark_looming" in lines[0] and "light_looming" in lines[1]
+
+
+def test_events_no_progress_writes_no_progress_lines(tmp_path, capsys):
+    assert main(["events", STIM, "--out", str(tmp_path / "ev"), "--no-progress"]) == 0
+    assert not [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("[")]
+
+
+def test_an_emulated_video_has_one_bin_fewer_than_frames_and_says_how_they_map(tmp_path, capsys):
+    """Events come from changes between frames: n frames give n - 1 bins, bin k holding the change from frame
+    k to k + 1 (a frame model's frame k + 1); the line says so, and a step change at frame 5 lands in bin 4."""
+    frames = np.full((12, 32, 32), 60, np.uint8)
+    frames[5:, 8:24, 8:24] = 200  # one change: frame 4 -> 5
+    np.save(tmp_path / "step.npy", frames)
+    out = tmp_path / "step_events.npy"
+    assert main(["events", str(tmp_path / "step.npy"), "--out", str(out), "--no-progress"]) == 0
+    line = capsys.readouterr().out
+    assert "12 frames -> 11 bins" in line and "frames s..e are bins s-1..e-1" in line
+    counts = [int(on.sum() + off.sum()) for on, off in open_event_source(out, (32, 32)).contrast(0.2)]
+    assert [k for k, c in enumerate(counts) if c] == [4]
+
+
+def test_a_video_changing_on_every_frame_emulates_to_one_bin_fewer_than_its_frames(tmp_path, capsys):
+    out = tmp_path / "dl.npy"
+    assert main(["events", STIM, "--out", str(out), "--no-progress"]) == 0  # 16 frames, a change on each
+    assert "16 frames -> 15 bins" in capsys.readouterr().out
+    assert sum(1 for _ in open_event_source(out).contrast(0.2)) == 15

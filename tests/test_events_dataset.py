@@ -264,7 +264,7 @@ def test_render_command_writes_one_movie_frame_per_bin_of_a_recording(tmp_path, 
     movie = tmp_path / "rec.avi"
     assert main(["render", str(rec), "--model", "cdnf", "--sensor-size", SIZE, "--out", str(movie),
                  "--no-progress"]) == 0
-    assert f"{movie}: 6 frames" in capsys.readouterr().err
+    assert f"{movie}: 6 frames" in capsys.readouterr().out  # "wrote" lines go to stdout, as run's do
     cap = cv2.VideoCapture(str(movie))
     ok, frame = cap.read()
     n = 1

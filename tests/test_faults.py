@@ -10,6 +10,8 @@ import shutil
 import signal
 import subprocess
 import sys
+import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -25,9 +27,40 @@ ENV = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), str(TESTS), os.env
 linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="uses /proc and Linux signals")
 
 
-def _cli(*args: str, timeout: float = 300, **kw) -> subprocess.CompletedProcess:
+#: A child that was told to stop (signal, killed parent) and still runs after this long is hung; its slow
+#: tasks (fault_tasks.SLOW_TASK_S) take far longer, so a pass never depends on how fast the machine is.
+HUNG_S = 600
+
+
+def _cli(*args: str, timeout: float | None = None, **kw) -> subprocess.CompletedProcess:
+    """Run the command line in a child process; by default however long it takes (a slow machine is no fault)."""
     return subprocess.run([sys.executable, "-m", "cdnf_ti.run", *args], capture_output=True, text=True,
                           timeout=timeout, env=ENV, **kw)
+
+
+#: Runs the command in argv[2:] as its own child and writes that child's peak resident memory (KiB on
+#: Linux) to the file argv[1]. A small interpreter forks it, so the figure is the command's own: a child
+#: forked straight from a test process that has grown (kernels, frames) starts at that process's size.
+_PEAK_LAUNCHER = (
+    "import os, subprocess, sys\n"
+    "p = subprocess.Popen(sys.argv[2:])\n"
+    "_, status, usage = os.wait4(p.pid, 0)\n"
+    "open(sys.argv[1], 'w').write(str(usage.ru_maxrss))\n"
+    "sys.exit(os.waitstatus_to_exitcode(status))\n"
+)
+
+
+def _cli_and_peak_memory(*args: str) -> tuple[subprocess.CompletedProcess, int | None]:
+    """Run the command line in a child; also return its peak resident memory in bytes (None: not measurable here)."""
+    cmd = [sys.executable, "-m", "cdnf_ti.run", *args]
+    if not hasattr(os, "wait4"):
+        return subprocess.run(cmd, capture_output=True, text=True, env=ENV), None
+    with tempfile.TemporaryDirectory() as d:
+        peak_file = Path(d) / "peak"
+        proc = subprocess.run([sys.executable, "-c", _PEAK_LAUNCHER, str(peak_file), *cmd], capture_output=True,
+                              text=True, env=ENV)
+        kib = 1 if sys.platform == "darwin" else 1024  # ru_maxrss: bytes on macOS, KiB elsewhere
+        return proc, int(peak_file.read_text()) * kib
 
 
 def _children(pid: int) -> list[int]:
@@ -80,13 +113,11 @@ def _start_slow_map() -> subprocess.Popen:
 
 
 @linux_only
-def test_sigint_cancels_pending_tasks_and_exits_130_within_seconds():
+def test_sigint_cancels_pending_tasks_and_exits_130():
     p = _start_slow_map()
-    t0 = time.monotonic()
     p.send_signal(signal.SIGINT)
-    rc = p.wait(timeout=30)
+    rc = p.wait(timeout=HUNG_S)  # the slow tasks (an hour each) were not waited for
     assert rc == 130
-    assert time.monotonic() - t0 < 10  # the slow tasks (60 s each) were not waited for
     assert "interrupted" in p.stdout.read()
 
 
@@ -96,9 +127,8 @@ def test_second_sigint_exits_at_once():
     p.send_signal(signal.SIGINT)
     time.sleep(0.02)
     p.send_signal(signal.SIGINT)
-    t0 = time.monotonic()
-    rc = p.wait(timeout=30)
-    assert rc == 130 and time.monotonic() - t0 < 10
+    rc = p.wait(timeout=HUNG_S)
+    assert rc == 130
 
 
 @linux_only
@@ -109,20 +139,19 @@ def test_sigint_on_parallel_dataset_run_keeps_finished_clips_and_resume_skips_th
     cmd = [sys.executable, "-m", "cdnf_ti.run", "dataset", str(ds), "--out", str(out), "--workers", "2",
            "--no-figures"]
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
-    deadline = time.monotonic() + 240
-    while not list(out.glob("traces/clean/*.json")) and time.monotonic() < deadline and p.poll() is None:
+    while not list(out.glob("traces/clean/*.json")) and p.poll() is None:  # until a clip has finished
         time.sleep(0.05)
+    finished = sorted(x.name for x in out.glob("traces/clean/*.json"))
     p.send_signal(signal.SIGINT)
-    t0 = time.monotonic()
-    rc = p.wait(timeout=60)
+    rc = p.wait(timeout=HUNG_S)
     err = p.stderr.read()
     if rc == 0:
         pytest.skip("the run finished before the interrupt arrived (machine too fast for this test)")
     assert rc == 130, err
-    assert time.monotonic() - t0 < 15
+    assert finished, "no clip finished before the run ended"
     assert "Traceback" not in err and "interrupted" in err
     kept = sorted(x.name for x in out.glob("traces/clean/*.json"))
-    assert kept  # finished clips are kept
+    assert set(finished) <= set(kept)  # the clips finished before the interrupt are kept
     assert not list(out.rglob("*.tmp*"))
     proc = _cli("dataset", str(ds), "--out", str(out), "--workers", "0", "--no-figures", "--no-progress")
     assert proc.returncode == 0, proc.stderr
@@ -158,7 +187,7 @@ def test_killing_the_main_process_leaves_no_orphan_workers():
     assert workers
     p.kill()
     p.wait()
-    deadline = time.monotonic() + 10
+    deadline = time.monotonic() + HUNG_S  # the workers' tasks sleep far longer: alive then means orphaned
     while any(_alive(w) for w in workers) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not any(_alive(w) for w in workers)
@@ -193,7 +222,7 @@ def test_unavailable_arch_is_one_line_and_exit_2(command, looming_npy, small_dat
             "demo": ["demo", "--size", "32", "--no-progress"],
             "dataset": ["dataset", str(small_dataset), "--out", out, "--workers", "2"],
             "experiment": ["experiment", "table1", "--out", out, "--size", "32", "--workers", "2"]}[command]
-    proc = _cli(*args, "--arch", "gpu", timeout=120)
+    proc = _cli(*args, "--arch", "gpu")
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr and "BrokenProcessPool" not in proc.stderr
     assert proc.stderr.strip().splitlines() == [
@@ -286,13 +315,11 @@ def test_unwritable_output_folder_fails_before_any_work(looming_npy, tmp_path):
         ro = tmp_path / "ro"
         ro.mkdir()
         ro.chmod(0o555)
-    t0 = time.monotonic()
-    proc = _cli(str(looming_npy), "--out", str(ro), timeout=120)
+    proc = _cli(str(looming_npy), "--out", str(ro))
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [proc.stderr.strip()]
     assert proc.stderr.startswith(f"error: {ro}: output folder is not writable")
     assert "frames" not in proc.stdout  # no model ran
-    assert time.monotonic() - t0 < 60
 
 
 def test_write_error_names_the_path(tmp_path, monkeypatch):
@@ -326,7 +353,7 @@ def _file_size_limit(limit: int):
 def test_generate_on_a_full_disk_names_the_file_and_not_the_frame_rate(tmp_path):
     out = tmp_path / "loom.avi"
     proc = subprocess.run([sys.executable, "-m", "cdnf_ti.run", "generate", "dark_looming", "--size", "200",
-                           "--out", str(out), "--no-progress"], capture_output=True, text=True, timeout=120,
+                           "--out", str(out), "--no-progress"], capture_output=True, text=True,
                           env=ENV, preexec_fn=_file_size_limit(8_000))
     assert proc.returncode == 2, proc.stderr
     assert "frame rate" not in proc.stderr and "PNG" not in proc.stderr
@@ -347,13 +374,13 @@ def test_generate_on_a_full_disk_names_the_file_and_not_the_frame_rate(tmp_path)
 ])
 def test_impossible_sizes_and_drop_counts_are_rejected_up_front(args, looming_npy, tmp_path):
     argv = [a.format(tmp=tmp_path, npy=looming_npy) for a in args]
-    t0 = time.monotonic()
-    proc = _cli(*argv, timeout=120)
+    proc, peak_bytes = _cli_and_peak_memory(*argv)
     assert proc.returncode == 2, proc.stdout + proc.stderr
     err = [ln for ln in proc.stderr.splitlines() if ln.strip() and not ln.startswith(("usage:", " "))]
     assert len(err) == 1 and "error:" in err[0] and "Traceback" not in proc.stderr  # (argparse adds usage)
     assert "MemoryError" not in proc.stderr
-    assert time.monotonic() - t0 < 60
+    if peak_bytes is not None:  # rejected before any frame was made (one 20000 x 20000 float32 frame: 1.6 GB)
+        assert peak_bytes < 1 << 30, f"peak memory {peak_bytes / 2**20:.0f} MiB"
 
 
 def test_limits_allow_ordinary_sizes():
@@ -444,7 +471,7 @@ def test_second_run_into_a_locked_output_folder_waits_then_runs(looming_npy, tmp
         assert line.startswith("note: ") and "another cdnf_ti run" in line and "waiting" in line
         time.sleep(0.5)
         assert p.poll() is None and not (out / "looming.cdnf.csv").exists()  # it waits, writes nothing
-    assert p.wait(timeout=120) == 0
+    assert p.wait() == 0
     assert (out / "looming.cdnf.csv").exists()
 
 
@@ -527,7 +554,7 @@ def test_library_adopts_a_host_programs_taichi_runtime():
         "CDNF().run(np.random.default_rng(0).random((3, 32, 32), dtype=np.float32))\n"
         "print('kept', x[2])\n"
     )
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=180, env=ENV)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=ENV)
     assert proc.returncode == 0, proc.stderr
     assert "kept 7.0" in proc.stdout
 
@@ -601,3 +628,285 @@ def test_one_failing_model_in_run_gives_an_error_line_for_that_model_only(loomin
     rows = list(csv.DictReader(open(tmp_path / "o" / "summary.csv")))
     assert [(r["model"], r["status"]) for r in rows] == [("cdnf", "ok"),
                                                           ("broken_for_run_test", "error: RuntimeError: model bug")]
+
+
+# --- issue 37: names from data stay inside their folders ---------------------------------------------------
+
+def _listing(root: Path, skip: Path) -> dict[str, tuple[int, int]]:
+    """Every file under ``root`` but those under ``skip``: relative name -> (size, mtime_ns)."""
+    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*")
+            if p.is_file() and skip not in p.parents}
+
+
+@pytest.mark.parametrize("clip", ["../../../victim", "{victim}", "/etc/passwd"])
+def test_clip_name_leaving_the_dataset_folder_is_rejected_naming_the_row(clip, small_dataset, tmp_path):
+    top = tmp_path / "top"
+    ds = top / "a" / "b" / "ds"  # ../../../victim from ds is top/victim
+    shutil.copytree(small_dataset, ds)
+    shutil.copy(ds / "dark_looming.avi", top / "victim.avi")  # a video outside the folder
+    name = clip.format(victim=top / "victim.avi")
+    with open(ds / "labels.csv", "a") as f:
+        f.write(f"{name},non-collision,,,\n")
+    out = top / "a" / "b" / "out"
+    before = _listing(top, ds)
+    proc = _cli("dataset", str(ds), "--out", str(out), "--workers", "0", "--no-progress", timeout=120)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert proc.stderr.strip().splitlines() == [proc.stderr.strip()]
+    assert proc.stderr.startswith(f"error: {ds / 'labels.csv'}: row 5 ({name}): clip name ")
+    assert _listing(top, ds) == before  # nothing written outside the dataset folder (no --out work either)
+    assert not list(top.rglob("victim.*.csv")) and not list(top.rglob("*victim*.png"))
+
+
+@pytest.mark.parametrize("name", ["..", ".", "a/b", "a\\b", "/etc/passwd", "C:x", "", "x\0y"])
+def test_a_name_that_is_not_plain_has_a_problem(name):
+    from cdnf_ti.paths import name_problem
+
+    assert name_problem(name) is not None
+
+
+@pytest.mark.parametrize("name", ["clip", "clip.avi", "a..b", ".hidden", "my clip (1)"])
+def test_a_plain_name_has_no_problem(name):
+    from cdnf_ti.paths import name_problem
+
+    assert name_problem(name) is None
+
+
+@pytest.mark.parametrize("name", ["../x.csv", "/tmp/x.csv", "traces/../../x.csv"])
+def test_output_path_built_from_a_name_that_leaves_its_folder_is_refused(name, tmp_path):
+    from cdnf_ti.paths import PathEscapeError, inside
+
+    with pytest.raises(PathEscapeError, match="must stay inside"):
+        inside(tmp_path, name)
+    assert inside(tmp_path, "traces/clean/c.cdnf.csv") == tmp_path / "traces" / "clean" / "c.cdnf.csv"
+
+
+def test_trace_of_a_clip_named_with_dots_cannot_leave_the_output_folder(tmp_path):
+    from cdnf_ti.experiments.layout import trace_path
+    from cdnf_ti.paths import PathEscapeError
+
+    with pytest.raises(PathEscapeError):
+        trace_path(tmp_path, "clean", "../../victim", "cdnf")
+
+
+# --- issue 37: content, not modification time ---------------------------------------------------------------
+
+def test_video_changed_in_place_with_size_and_mtime_kept_is_recomputed_with_a_note(small_dataset, tmp_path,
+                                                                                    capsys):
+    from cdnf_ti.experiments.dataset import run_dataset
+
+    ds = tmp_path / "ds"
+    shutil.copytree(small_dataset, ds)
+    clip = ds / "dark_looming.avi"
+    old, new = clip.read_bytes(), (ds / "dark_receding.avi").read_bytes()
+    size = max(len(old), len(new))  # both padded to one size (the AVI reader ignores trailing bytes)
+    clip.write_bytes(old.ljust(size, b"\0"))
+    kw = dict(models=["cdnf"], workers=0, progress=False, figures=False)
+    assert run_dataset(ds, None, tmp_path / "out", **kw).ran == 3
+    st = clip.stat()
+    with open(clip, "r+b") as f:  # another video in place, as cp -p or rsync -t leave it
+        f.write(new.ljust(size, b"\0"))
+    os.utime(clip, ns=(st.st_atime_ns, st.st_mtime_ns))
+    assert (clip.stat().st_size, clip.stat().st_mtime_ns) == (st.st_size, st.st_mtime_ns)
+    capsys.readouterr()
+    again = run_dataset(ds, None, tmp_path / "out", **kw)
+    assert (again.ran, again.skipped) == (1, 2)
+    note = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("note: ")]
+    assert len(note) == 1 and "dark_looming.cdnf [clean]: input file content" in note[0]
+
+
+def test_content_digest_reads_both_ends_of_a_large_file(tmp_path):
+    from cdnf_ti.provenance import CONTENT_SPAN, content_digest
+
+    f = tmp_path / "big.bin"
+    data = bytearray(3 * CONTENT_SPAN)
+    f.write_bytes(data)
+    digests = {content_digest(f)}
+    for at in (0, len(data) - 1):
+        changed = bytearray(data)
+        changed[at] = 1
+        f.write_bytes(changed)
+        digests.add(content_digest(f))
+    assert len(digests) == 3
+
+
+# --- issue 37: frame size changes mid-video -----------------------------------------------------------------
+
+def test_video_whose_frame_size_changes_mid_stream_is_rejected_naming_the_frame(tmp_path):
+    from mjpeg_avi import mjpeg_avi, ramp_frames
+
+    video = tmp_path / "resized.avi"
+    video.write_bytes(mjpeg_avi(ramp_frames(5, 48, 64) + ramp_frames(5, 96, 80)))
+    proc = _cli(str(video), "--out", str(tmp_path / "o"), "--no-progress", timeout=300)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert [ln for ln in proc.stderr.splitlines() if ln.startswith("error")] == [
+        f"error: {video}: frame 5 is 80x96, the video states 64x48 (frame size changed mid-video)"]
+
+
+def test_video_of_one_frame_size_reads_every_frame(tmp_path):
+    from mjpeg_avi import mjpeg_avi, ramp_frames
+
+    from cdnf_ti.frames import iter_grey, open_source
+
+    video = tmp_path / "steady.avi"
+    video.write_bytes(mjpeg_avi(ramp_frames(6, 48, 64)))
+    frames = list(iter_grey(open_source(video), prefetch=0))
+    assert len(frames) == 6 and frames[0].shape == (48, 64)
+
+
+def test_jpeg_size_is_read_from_the_start_of_frame_marker():
+    import cv2
+
+    from cdnf_ti.frames import jpeg_size
+
+    data = cv2.imencode(".jpg", np.zeros((37, 53), np.uint8))[1].tobytes()
+    assert jpeg_size(data) == (53, 37)
+    assert jpeg_size(data[:20]) is None and jpeg_size(b"not a jpeg") is None
+
+
+# --- issue 37: signals ----------------------------------------------------------------------------------------
+
+def _read_until(stream, text: str) -> list[str]:
+    """Lines of ``stream`` up to and including the first that contains ``text`` (all of them at EOF)."""
+    lines = []
+    for line in stream:
+        lines.append(line)
+        if text in line:
+            break
+    return lines
+
+
+def _wchan(pid: int) -> str:
+    """What the main thread of process ``pid`` waits on in the kernel (``futex_do_wait``, ...)."""
+    try:
+        return Path(f"/proc/{pid}/wchan").read_text()
+    except OSError:
+        return ""
+
+
+@linux_only
+def test_ctrl_c_while_native_code_holds_the_interpreter_ends_the_run_and_keeps_finished_results(looming_npy,
+                                                                                                tmp_path):
+    stall = tmp_path / "stall.npy"  # stands for an input whose kernels compile: see fault_tasks
+    shutil.copy(looming_npy, stall)
+    out = tmp_path / "o"
+    code = "import fault_tasks\nfault_tasks.main_run_with_native_stall()\n"
+    p = subprocess.Popen([sys.executable, "-c", code, str(looming_npy), str(stall), "--backend", "numpy",
+                          "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+    try:
+        lines = _read_until(p.stdout, "stalling")
+        assert lines and "stalling" in lines[-1], "".join(lines) + p.stderr.read()
+        finished = (out / "looming.cdnf.csv").read_bytes()
+        deadline = time.monotonic() + 120
+        while "futex" not in _wchan(p.pid) and time.monotonic() < deadline:  # until it waits in native code
+            time.sleep(0.05)
+        assert "futex" in _wchan(p.pid)
+        p.send_signal(signal.SIGINT)
+        rc = p.wait(timeout=30)  # the stall never ends
+    finally:
+        p.kill()
+        p.wait()
+    err = p.stderr.read()
+    assert rc != 0 and "Traceback" not in err
+    assert "interrupted while native code (a kernel compile) holds the interpreter" in err
+    assert (out / "looming.cdnf.csv").read_bytes() == finished
+    assert not (out / "stall.cdnf.csv").exists()
+
+
+def test_sweep_removes_temporary_files_of_dead_writers_on_start(small_dataset, tmp_path):
+    from cdnf_ti.experiments.paramsweep import run_param_sweep
+
+    out = tmp_path / "sweep"
+    stale = out / "settings" / "x" / "traces" / "clean" / ".c.cdnf.json.999999999.0123abcd.tmp.json"
+    stale.parent.mkdir(parents=True)
+    stale.write_text("half a record")  # as a sweep stopped by Ctrl-C leaves it (its writer is gone)
+    run_param_sweep(small_dataset, None, out, "cdnf", ["h=0.1,0.2"], workers=0, progress=False, figures=False,
+                    html=False, backend="numpy")
+    assert not stale.exists()
+    assert not list(out.rglob("*.tmp*"))
+
+
+@linux_only
+@pytest.mark.parametrize("command", [["dataset"], ["experiment", "sweep"]])
+def test_sigterm_stops_a_parallel_batch_run_like_ctrl_c(command, small_dataset, tmp_path):
+    ds = tmp_path / "ds"
+    shutil.copytree(small_dataset, ds)
+    out = tmp_path / "out"
+    extra = ["--model", "cdnf", "--param", "h=0.1,0.2,0.3"] if command[-1] == "sweep" else []
+    p = subprocess.Popen([sys.executable, "-m", "cdnf_ti.run", *command, str(ds), *extra, "--out", str(out),
+                          "--workers", "2", "--no-figures", "--no-progress"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+    deadline = time.monotonic() + 120
+    while len(_children(p.pid)) < 3 and time.monotonic() < deadline and p.poll() is None:  # the pool is up
+        time.sleep(0.05)
+    p.send_signal(signal.SIGTERM)
+    rc = p.wait(timeout=60)
+    err = p.stderr.read()  # until the resource tracker, which shares stderr, has ended too
+    if rc == 0:
+        pytest.skip("the run finished before the signal arrived (machine too fast for this test)")
+    assert rc == 130, err
+    assert "Traceback" not in err and "interrupted" in err
+    assert "leaked semaphore" not in err and "resource_tracker" not in err
+    assert not (out / ".cdnf_ti.lock").exists()
+    assert not list(out.rglob("*.tmp*"))
+
+
+def test_second_signal_during_the_clean_stop_of_live_record_leaves_a_playable_recording(tmp_path, monkeypatch):
+    import cv2
+
+    from cdnf_ti.live import Recorder, _Signals
+    from cdnf_ti.live_sources import Frame
+
+    exits = []
+    monkeypatch.setattr(os, "_exit", exits.append)  # the process would end here
+    path = tmp_path / "rec.avi"
+    recorder = Recorder(path, fps=30.0, backlog=512)
+    image = np.zeros((64, 64), np.uint8)
+    result = {"model": "cdnf", "output_name": "I_v", "value": 0.5, "alert": False, "latency_ms": 1.0}
+    for t in range(300):  # a backlog the clean stop would still be writing
+        recorder.put(Frame(t, image, 0.0, t / 30.0), [result])
+    deadline = time.monotonic() + 120
+    while recorder._queue.qsize() > 297 and time.monotonic() < deadline:  # the writer has taken 3 frames
+        time.sleep(0.01)
+    signals = _Signals(threading.Event(), recorder.finish_now)
+    signals._handle(signal.SIGINT, None)  # Ctrl-C: the clean stop begins
+    signals._handle(signal.SIGINT, None)  # Ctrl-C again: the process ends now
+    assert exits == [130]
+    cap = cv2.VideoCapture(str(path))
+    frames = 0
+    while cap.read()[0]:
+        frames += 1
+    cap.release()
+    assert frames > 0
+    assert not [p for p in tmp_path.iterdir() if p.name != "rec.avi"]  # no hidden temporary file left
+
+
+@pytest.mark.parametrize("existing", [False, True], ids=["new-folder", "existing-folder"])
+def test_a_run_whose_every_input_failed_leaves_the_output_folder_as_it_was(looming_npy, tmp_path, capsys, existing):
+    from cdnf_ti.models import MODELS, register_model
+    from cdnf_ti.models.sdnf import SDNF
+
+    class Broken(SDNF):
+        name = "broken_for_empty_run_test"
+
+        def step(self, frame):
+            raise RuntimeError("model bug")
+
+    out = tmp_path / "o"
+    if existing:
+        out.mkdir()
+        (out / "summary.csv").write_text("input,clip,model\nearlier,earlier,cdnf\n")
+    before = sorted((p.name, p.read_bytes()) for p in out.iterdir()) if existing else None
+    register_model(Broken)
+    try:
+        code = main([str(looming_npy), "--model", "broken_for_empty_run_test", "--backend", "numpy", "--out",
+                     str(out), "--no-progress"])
+    finally:
+        MODELS.pop("broken_for_empty_run_test", None)
+    assert code == 2
+    assert "error:" in capsys.readouterr().err
+    if existing:
+        assert sorted((p.name, p.read_bytes()) for p in out.iterdir()) == before
+    else:
+        assert not out.exists()

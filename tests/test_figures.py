@@ -94,3 +94,24 @@ def test_coherence_panel_from_the_sweep(tmp_path):
     assert (red > 100) == (n_alerts > 0)
     md = (tmp_path / "coherence.md").read_text()
     assert "| Dark approaching | cdnf |" in md and "20%" in md
+
+
+def test_accuracy_value_labels_sit_clear_of_the_papers_diamonds(tmp_path, monkeypatch):
+    """Each bar's value label starts above its bar and above the paper's diamond at that bar, whichever is
+    higher (the C-DNF bars match the paper, so a label just above the bar sat under the diamond)."""
+    from cdnf_ti.experiments import figures
+    from cdnf_ti.paper import TABLE2
+
+    figs = []
+    monkeypatch.setattr(figures, "save_figure", lambda fig, path, dpi=110: figs.append(fig) or path)
+    models = list(TABLE2)
+    res = {m: {c: {"accuracy": TABLE2[m][c] / 100} for c in ("clean", "rain")} for m in models}  # bars = paper
+    figures.plot_accuracy(tmp_path / "a.png", res, models, ["clean", "rain"])
+    ax = figs[0].axes[0]
+    diamonds = [(x, y) for line in ax.lines if line.get_marker() == "D" for x, y in zip(*line.get_data())]
+    labels = [t for t in ax.texts if t.get_text().isdigit()]
+    assert len(labels) == len(diamonds) == 2 * len(models)
+    for t in labels:
+        x, y = t.get_position()
+        (dy,) = [d for dx, d in diamonds if abs(dx - x) < 1e-9]
+        assert t.get_va() == "bottom" and y >= dy + 2.5 and y >= float(t.get_text()) - 0.5

@@ -123,3 +123,18 @@ def test_generate_to_an_unsupported_output_type_is_a_one_line_error(tmp_path, ca
     assert rc == 2
     assert err.startswith(f"error: {tmp_path / name}: output must be a .avi file") and err.count("\n") == 1
     assert not (tmp_path / name).exists()
+
+
+@pytest.mark.parametrize("command", ["generate", "rain"])
+def test_every_option_has_help_text(command, capsys):
+    """``--help`` gives every option a description (argparse prints an option without one alone on its line)."""
+    from cdnf_ti.run import main
+
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    lines = capsys.readouterr().out.splitlines()
+    options = lines[next(i for i, ln in enumerate(lines) if ln.startswith("options")) + 1:]
+    bare = [ln.strip() for i, ln in enumerate(options)
+            if ln.startswith("  -") and len(ln.split("  ")) < 3  # no description on the option's own line...
+            and not (i + 1 < len(options) and options[i + 1].startswith(" " * 10))]  # ...nor on the next
+    assert bare == []

@@ -96,3 +96,16 @@ def test_per_clip_figures_are_redrawn_after_a_labels_edit(run):
     assert png.stat().st_mtime_ns > before  # its window changed: redrawn
     assert other.stat().st_mtime_ns == before_other  # unchanged label: reused
     assert Path(again.out / "report.html").is_file()
+
+
+def test_threshold_sweep_headings_name_the_model_and_its_parameter_only(run):
+    """Each heading is ``### <model>: <swept parameter>``; how it is scored is said once, in words, below it."""
+    _ds, r = run
+    md = (r.out / "summary.md").read_text()
+    section = md.split("## Threshold sweep (in-sample)", 1)[1].split("\n## ", 1)[0]
+    headings = [ln for ln in section.splitlines() if ln.startswith("### ")]
+    assert [h.split(":")[0] for h in headings] == ["### cdnf", "### lgmd1"]
+    for h in headings:
+        parameter = h.split(": ", 1)[1]
+        assert "sweep_alerts" not in h and h.count(parameter) == 1 and "`" not in h
+    assert "sweep_alerts" not in section

@@ -161,3 +161,35 @@ def test_every_missing_clip_and_window_past_the_end_is_listed(tmp_path):
     msg = str(e.value)
     assert "3 bad rows" in msg and "window_end 20 is outside the video" in msg
     assert "clip 'b' has no video" in msg and "clip 'c' has no video" in msg and "hint:" in msg
+
+
+def test_every_kind_of_bad_row_is_reported_in_one_pass(tmp_path, capsys):
+    """A bad value, a clip with no video and a window past the video's end, all in one error line."""
+    from cdnf_ti.run import main
+
+    _video(tmp_path, "a", n=12)
+    _video(tmp_path, "c", n=12)
+    p = _write(tmp_path, "clip,label,window_start,window_end\n"
+                         "a,collision,5,20\n"          # row 2: window past the end
+                         "b,non-collision,,\n"         # row 3: no video
+                         "c,colision,,\n")             # row 4: bad label
+    assert main(["dataset", str(tmp_path), "--labels", str(p), "--out", str(tmp_path / "o"), "--no-progress"]) == 2
+    errors = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("error:")]
+    assert len(errors) == 1 and "3 bad rows" in errors[0]
+    assert errors[0].index("row 2 (a)") < errors[0].index("row 3") < errors[0].index("row 4 (c)")
+    assert "outside the video" in errors[0] and "no video" in errors[0] and "label 'colision'" in errors[0]
+
+
+def test_a_row_with_a_bad_label_and_a_bad_frame_reports_both(tmp_path):
+    p = _write(tmp_path, "clip,label,window_start,window_end\na,colision,x,2\n")
+    with pytest.raises(InputError) as e:
+        read_labels(p)
+    assert "label 'colision'" in str(e.value) and "window_start 'x'" in str(e.value)
+
+
+def test_an_unclosed_quote_is_named_as_the_cause(tmp_path):
+    p = _write(tmp_path, 'clip,label,window_start,window_end\na,collision,1,2\nb,"non-collision,,\nc,collision,3,4\n')
+    with pytest.raises(InputError) as e:
+        read_labels(p)
+    msg = str(e.value)
+    assert "row 3" in msg and "quote" in msg and "never closed" in msg and "\n" not in msg

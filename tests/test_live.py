@@ -379,9 +379,8 @@ def test_signal_stops_cleanly_and_flushes_every_sink(tmp_path, sig, exit_code):
             env={**os.environ, "PYTHONUNBUFFERED": "1"})
         stdout_lines = []
         try:
-            deadline = time.monotonic() + 240
             frames_seen = 0
-            while frames_seen < 10 and time.monotonic() < deadline:
+            while frames_seen < 10:  # however long the start takes (kernels compile first)
                 line = proc.stdout.readline()
                 if not line:
                     break
@@ -392,13 +391,18 @@ def test_signal_stops_cleanly_and_flushes_every_sink(tmp_path, sig, exit_code):
                 frames_seen += record["event"] == "frame"
             assert frames_seen == 10, proc.stderr.read()
             proc.send_signal(sig)
-            rest, err = proc.communicate(timeout=60)
+            rest, err = proc.communicate(timeout=600)  # a hang guard: it stops within a frame or two
         finally:
             if proc.poll() is None:
                 proc.kill()
-    time.sleep(0.3)
     done.set()
-    listener.join(2)
+    listener.join()
+    receiver.setblocking(False)
+    while True:  # the child has exited: what it sent is in the socket's buffer, however slow the listener was
+        try:
+            datagrams.append(receiver.recv(65536))
+        except BlockingIOError:
+            break
     receiver.close()
     stdout_lines += rest.splitlines(keepends=True)
     assert proc.returncode == exit_code, err

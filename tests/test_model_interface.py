@@ -19,26 +19,60 @@ def test_one_pass_over_several_models_equals_separate_runs():
         assert np.array_equal(tr.spike, alone.spike), name
 
 
-def test_trace_time_and_fps_leave_out_the_slow_first_steps(monkeypatch):
-    """The first steps allocate state and compile kernels (the LGMD family compiles its layers on
-    frame 1): first steps that take 1000 s (on a stand-in clock) must not show in ``seconds`` or
-    ``fps``; every later step must."""
-    clock = SimpleNamespace(now=0.0)
-    monkeypatch.setattr(base, "time", SimpleNamespace(perf_counter=lambda: clock.now))
-    model = create_model("lgmd2")
-    real_step, calls = model.step, []
+class _Clock:
+    """A stand-in clock: seconds advance only when a step says so."""
 
-    def step(frame):
-        calls.append(len(calls))
-        clock.now += 1000.0 if len(calls) <= base.WARMUP_STEPS else 0.25  # compiles, then a 4 frames/s model
-        return real_step(frame)
+    def __init__(self):
+        self.now = 0.0
 
-    model.step = step
-    tr = model.run(small_stimulus("dark_translating", size=48).frames())
-    assert len(calls) == tr.n_frames > 2
-    assert base.WARMUP_STEPS == 2
-    assert tr.seconds == pytest.approx(0.25 * (tr.n_frames - 2))
+    def __call__(self) -> float:
+        return self.now
+
+
+class _LateCompiler(base.Model):
+    """A test double of a model that compiles kernels on a later frame (as oLGMD does on its first
+    active frame, index 2): building its backend takes 5 s, a compiling step 100 s, any other 0.25 s
+    (a 4 frames/s model), all on a stand-in clock."""
+
+    name = "late_compiler"
+    BACKENDS = ("numpy",)
+
+    def __init__(self, clock: _Clock, compile_at: tuple[int, ...]):
+        self.clock, self.compile_at, self.compiled = clock, compile_at, 0
+        super().__init__(backend="numpy")
+
+    def _numpy_backend(self, shape):
+        self.clock.now += 5.0
+        return SimpleNamespace(shape=shape, load=lambda grey, first: None, reset=lambda: None, fields=dict)
+
+    def compile_count(self) -> int:
+        return self.compiled
+
+    def _step(self, t, grey, loaded):
+        if t in self.compile_at:
+            self.compiled += 1
+            self.clock.now += 100.0
+        else:
+            self.clock.now += 0.25
+        return base.StepResult(t, 0.0, False)
+
+
+@pytest.mark.parametrize("compile_at", [(0,), (2,), (1, 5)], ids=["first", "third", "second-and-sixth"])
+def test_steps_that_compile_are_left_out_of_the_time_whenever_they_happen(compile_at):
+    clock = _Clock()
+    frames = [np.zeros((8, 8), np.uint8)] * 10
+    (tr,) = run_models([_LateCompiler(clock, compile_at)], iter(frames), clock=clock)
+    setup = {0, *compile_at}  # the first step builds the backend
+    assert tr.timed_frames == 10 - len(setup)
+    assert tr.seconds == pytest.approx(0.25 * tr.timed_frames)
     assert tr.fps == pytest.approx(4.0)
+    assert tr.compile_seconds == pytest.approx(5.0 + 100.0 * len(compile_at) + 0.25 * (0 not in compile_at))
+
+
+def test_a_trace_with_no_step_free_of_set_up_has_no_speed():
+    clock = _Clock()
+    (tr,) = run_models([_LateCompiler(clock, (0, 1))], iter([np.zeros((8, 8), np.uint8)] * 2), clock=clock)
+    assert tr.timed_frames == 0 and np.isnan(tr.fps)
 
 
 @pytest.mark.parametrize("name", sorted(MODELS))

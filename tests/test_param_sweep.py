@@ -93,7 +93,7 @@ def test_other_models_parameters_can_be_swept():
 def test_command_line_exits_2_with_one_line_before_any_work(dataset, tmp_path, args, words):
     out = tmp_path / "out"
     p = subprocess.run([sys.executable, "-m", "cdnf_ti.run", "experiment", "sweep", str(dataset), "--out", str(out),
-                        "--no-progress", *args], capture_output=True, text=True, timeout=120)
+                        "--no-progress", *args], capture_output=True, text=True)
     assert p.returncode == 2
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and words in lines[0]

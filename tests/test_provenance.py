@@ -34,7 +34,7 @@ def _dataset_run(root: Path, data: Path, out: Path) -> subprocess.CompletedProce
     env = {**os.environ, "PYTHONPATH": str(root)}
     cmd = [sys.executable, "-m", "cdnf_ti.run", "dataset", str(data), "--out", str(out), "--backend", "numpy",
            "--workers", "0", "--no-progress", "--no-figures"]
-    return subprocess.run(cmd, cwd=root, env=env, capture_output=True, text=True, timeout=600)
+    return subprocess.run(cmd, cwd=root, env=env, capture_output=True, text=True)
 
 
 @pytest.mark.slow

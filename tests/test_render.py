@@ -29,7 +29,7 @@ def _read_all(path):
 def test_render_writes_a_playable_mp4_with_one_frame_per_input_frame(tmp_path):
     out = tmp_path / "movie.mp4"
     p = subprocess.run([sys.executable, "-m", "cdnf_ti.run", "render", "stim:dark_looming?size=64", "--model", "cdnf",
-                        "--out", str(out), "--no-progress"], capture_output=True, text=True, timeout=300)
+                        "--out", str(out), "--no-progress"], capture_output=True, text=True)
     assert p.returncode == 0, p.stderr
     frames, n, w, h = _read_all(out)
     from cdnf_ti.inputs import resolve_input
@@ -46,7 +46,7 @@ def test_render_writes_a_playable_mp4_with_one_frame_per_input_frame(tmp_path):
 
 def test_unknown_movie_suffix_is_a_one_line_error_before_any_work(tmp_path):
     p = subprocess.run([sys.executable, "-m", "cdnf_ti.run", "render", "stim:dark_looming?size=32",
-                        "--out", str(tmp_path / "m.gif")], capture_output=True, text=True, timeout=120)
+                        "--out", str(tmp_path / "m.gif")], capture_output=True, text=True)
     assert p.returncode == 2
     assert p.stderr.strip().count("\n") == 0 and "m.gif" in p.stderr and ".mp4" in p.stderr
 
@@ -85,7 +85,7 @@ def test_dataset_render_makes_a_movie_per_clip(tmp_path):
     ds = tmp_path / "ds"
     out = tmp_path / "out"
     p = subprocess.run([sys.executable, "-m", "cdnf_ti.run", "dataset", str(ds), "--out", str(out), "--workers", "0",
-                        "--render", "--no-progress", "--no-figures"], capture_output=True, text=True, timeout=300)
+                        "--render", "--no-progress", "--no-figures"], capture_output=True, text=True)
     assert p.returncode == 0, p.stderr
     for clip in ("dark_looming", "light_translating"):
         frames, n, _w, _h = _read_all(out / "movies" / f"{clip}.cdnf.mp4")
@@ -146,14 +146,89 @@ def test_field_ranges_hold_the_values_of_every_frame():
     from cdnf_ti.frames import iter_grey
     from cdnf_ti.inputs import resolve_input
     from cdnf_ti.models import create_model
-    from cdnf_ti.render import field_ranges, robust_range
+    from cdnf_ti.render import TRACE_KEY, field_ranges, robust_range
 
     src = resolve_input("stim:dark_looming?size=32")
     model = create_model("cdnf", backend="numpy")
     ranges = field_ranges(model, iter_grey(src))
     model.reset()
     for frame in iter_grey(src):
-        model.step(frame)
+        res = model.step(frame)
         for key, (lo, hi) in ranges.items():
+            if key == TRACE_KEY:  # the trace panel's y range: the output and the threshold
+                assert lo <= min(res.output, model.threshold) and max(res.output, model.threshold) <= hi
+                continue
             flo, fhi = robust_range(model.fields()[key])
             assert lo <= flo and fhi <= hi
+
+
+# -- colour maps, the trace's axis and its legend -----------------------------------------------------------
+
+def _ramp(scale, n: int = 9) -> np.ndarray:
+    """The colours of ``n`` values evenly from the scale's low to its high end, (n, 3) BGR as int."""
+    lo, hi = scale.limits
+    return scale(np.linspace(lo, hi, n, dtype=np.float32)[None, :])[0].astype(int)
+
+
+def test_a_signed_field_has_a_diverging_map_white_at_zero():
+    from cdnf_ti.render import FieldScale
+
+    colours = _ramp(FieldScale(-2.0, 1.0))  # symmetric: -2 .. 2, 0 in the middle
+    neg, zero, pos = colours[0], colours[4], colours[-1]
+    assert zero.min() > 230  # white at zero
+    assert neg[0] > neg[2] + 80 and pos[2] > pos[0] + 80  # blue below zero, red above: +max and -max differ
+    luminance = colours.sum(axis=1)
+    assert all(np.diff(luminance[:5]) > 0) and all(np.diff(luminance[4:]) < 0)  # lighter towards zero
+
+
+def test_a_non_negative_field_has_a_sequential_map_dark_at_zero():
+    from cdnf_ti.render import FieldScale
+
+    grey = cv2.cvtColor(_ramp(FieldScale(0.0, 3.0)).astype(np.uint8)[None], cv2.COLOR_BGR2GRAY)[0].astype(int)
+    assert all(np.diff(grey) > 0)
+
+
+def test_each_panel_gets_the_map_of_its_fields_sign():
+    """EMD-LPLC2's opponent motion (left - right) is signed, its LPLC2 response non-negative."""
+    from cdnf_ti.models import create_model
+    from cdnf_ti.render import DIVERGING, SEQUENTIAL, FieldScale, field_ranges
+    from cdnf_ti.stimuli.basic import basic_stimulus
+
+    frames = basic_stimulus("dark_looming", height=96, width=128, fps=100.0, duration=0.5).frames()
+    ranges = field_ranges(create_model("lplc2", backend="numpy", fps=100.0), frames)
+    assert FieldScale(*ranges["horizontal"])._cmap() is DIVERGING
+    assert FieldScale(*ranges["vertical"])._cmap() is DIVERGING
+    assert FieldScale(*ranges["lplc2"])._cmap() is SEQUENTIAL
+
+
+def test_the_trace_keeps_one_y_axis_while_the_movie_plays():
+    from cdnf_ti.models import create_model
+    from cdnf_ti.render import TRACE_H, field_ranges, render_frames
+    from cdnf_ti.stimuli.basic import basic_stimulus
+
+    stim = basic_stimulus("dark_looming", height=48, width=48)
+    model = create_model("cdnf", backend="numpy")
+    ranges = field_ranges(model, stim.frames())
+    movie = list(render_frames(model, stim.frames(), stim.fps, stim.n_frames, ranges=ranges))
+    axis = [m[-TRACE_H:, :44] for m in movie]  # the y axis's labels, left of the plot
+    assert all(np.array_equal(a, axis[0]) for a in axis)
+
+
+def test_the_window_legend_names_the_bands_colour_only_with_a_window():
+    from cdnf_ti.render import TRACE_H, WINDOW_BGR, WINDOW_COLOUR, _trace_panel, window_legend
+
+    assert window_legend(None) is None
+    assert window_legend((3, 7)).startswith(f"{WINDOW_COLOUR}: labelled window")
+    b, g, r = WINDOW_BGR
+    assert WINDOW_COLOUR == "pink" and r > b > g  # pink: red, then blue, little green
+    img = _trace_panel(320, 9, 20, [0.5] * 10, [None] * 10, [False] * 10, "m I", 30.0, (3, 7))
+    assert (img[TRACE_H // 2, 46 + (320 - 54) * 5 // 19] == WINDOW_BGR).all()  # the band, mid-window
+
+
+def test_render_prints_what_it_wrote_on_stdout(tmp_path, capsys):
+    from cdnf_ti.run import main
+
+    assert main(["render", "stim:dark_looming?size=32", "--backend", "numpy", "--out", str(tmp_path / "m.mp4"),
+                 "--no-progress"]) == 0
+    out, err = capsys.readouterr()
+    assert f"{tmp_path / 'm.mp4'}: " in out and str(tmp_path / "m.mp4") not in err

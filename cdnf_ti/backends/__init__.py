@@ -15,7 +15,7 @@ from __future__ import annotations
 from typing import Any, Callable
 
 from .. import taichi_runtime
-from . import cdnf, lplc2, sdnf
+from . import cdnf, lplc2
 from .engine import Backend
 
 #: Backend factories by model name: ``factory(model, shape, arch) -> backend``.
@@ -42,6 +42,18 @@ class Engine:
         return taichi_runtime.ensure_taichi(arch)
 
     @staticmethod
+    def compile_count() -> int:
+        """Kernels compiled (or loaded from the compile cache) in this process so far
+        (:func:`~cdnf_ti.taichi_runtime.compile_count`)."""
+        return taichi_runtime.compile_count()
+
+    @staticmethod
+    def compiling(label: str) -> Any:
+        """A context of steps that may compile kernels for ``label``: a one-line notice on a cold cache
+        (:class:`~cdnf_ti.taichi_runtime.compiling`)."""
+        return taichi_runtime.compiling(label)
+
+    @staticmethod
     def backend(model: Any, shape: tuple[int, int]) -> Any:
         """The compiled backend of ``model`` for frames of ``shape`` (H, W)."""
         # the model's own name, else the nearest base class's (a subclass that changes no equations)
@@ -60,5 +72,4 @@ ENGINE = Engine()
 
 
 register_backend("cdnf", cdnf.make_backend)
-register_backend("sdnf", sdnf.make_backend)
 register_backend("lplc2", lplc2.make_backend)

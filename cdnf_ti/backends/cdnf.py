@@ -12,6 +12,7 @@ import numpy as np
 
 from ..kernels import cdnf as layout, common
 from ..kernels.common import BORDER_CODES, LaunchRecord
+from ..kernels.engine import coefficient_array
 from ..kernels.schedule import MAX_WORKERS
 from ..params import THETA_SCALE, CDNFParams, contrast_kernel, dog_profiles, resting_levels
 from ..solver import RESTART_GROWTH, cdnf_local_starts
@@ -39,22 +40,15 @@ class Coefficients:
         k /= k.sum()  # W_c = k k^T with k the normalised 3-tap Gaussian (contrast_kernel is its outer product)
         wc = contrast_kernel(params.sigma_c)
         g1, g2 = dog_profiles(params)
-        values = np.zeros(layout.TAPS + g1.size + g2.size, np.float64)
-        values[[layout.K0, layout.K1]] = float(k[1]), float(k[0])
-        values[[layout.WC0, layout.WC1, layout.WC2]] = float(wc[1, 1]), float(wc[0, 1]), float(wc[0, 0])
-        values[layout.H_REST] = params.h
-        values[layout.TAU] = tau
-        values[layout.TOL] = params.tol
-        values[layout.GROW] = RESTART_GROWTH
-        values[[layout.ALPHA_ON, layout.ALPHA_OFF, layout.THETA]] = params.alpha_on, params.alpha_off, THETA_SCALE
-        values[[layout.DOG_A, layout.DOG_B]] = params.A, params.B
-        values[layout.LOCAL] = int(params.start == "local")
-        values[layout.WORKERS] = workers
-        self.values = values.astype(np.float32)  # each a float32 as a kernel's f32 argument would be
         starts = cdnf_local_starts(params).astype(np.float32)
-        self.values[layout.START_U:layout.START_U + starts.shape[1]] = starts[0]
-        self.values[layout.START_V:layout.START_V + starts.shape[1]] = starts[1]
-        self.values[layout.TAPS:] = np.concatenate([g1.astype(np.float32), g2.astype(np.float32)])
+        taps = np.concatenate([g1.astype(np.float32), g2.astype(np.float32)])
+        values = {"k": (k[1], k[0]), "wc": (wc[1, 1], wc[0, 1], wc[0, 0]), "h": params.h, "tau": tau,
+                  "tol": params.tol, "grow": RESTART_GROWTH, "alpha_on": params.alpha_on,
+                  "alpha_off": params.alpha_off, "theta": THETA_SCALE, "dog_a": params.A, "dog_b": params.B,
+                  "local": int(params.start == "local"), "workers": workers, "start_u": starts[0],
+                  "start_v": starts[1], "taps": taps}
+        # each a float32 as a kernel's f32 argument would be
+        self.values = np.array(coefficient_array(layout.COEF, values), np.float32)
         ti = dsl()
         self.array = ti.ndarray(ti.f32, self.values.shape)  # on the device once, not copied per launch
         self.array.from_numpy(self.values)

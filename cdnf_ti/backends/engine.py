@@ -131,10 +131,11 @@ class Backend:
         return record.residuals(updates), tuple(float(v) for v in self.out[:len(launch.results)])
 
     def fields(self) -> dict[str, np.ndarray]:
-        """Every plane (a pair's ``now`` buffer) of the last frame, (H, W) each, by name."""
+        """Every plane (a pair's ``now`` buffer) of the last frame, (H, W) each, by name; not the scratch
+        planes (named ``_...``)."""
         x = self.x.to_numpy()
         if self.lane:
             n, (H, W) = lanes(), self.shape
             x = x.reshape(x.shape[0], H, -1)[:, :, n:n + W]
         return {p.name: np.ascontiguousarray(x[p.slot + (self.parity if p.buffers == 2 else 0)])
-                for p in self.M.planes}
+                for p in self.M.planes if not p.name.startswith("_")}

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 from typing import Sequence
 
@@ -35,8 +36,11 @@ from ..cli_common import (
     unique_names,
 )
 from ..errors import UserError
+from ..experiments.parallel import _isatty
 from ..frames import iter_grey
 from ..inputs import STIM_PREFIX, parse_stim_spec, resolve_input, stimulus_label
+from ..limits import check_frame_size
+from ..paths import inside
 from .emulator import EmulatorParams, emulate
 from .readers import is_event_file
 from .source import open_event_source
@@ -99,7 +103,9 @@ def _info(args) -> int:
     ok = failed = 0
     for path in _recordings(args.inputs):
         try:
-            src = open_event_source(path, args.sensor_size, args.bin_ms)
+            src = open_event_source(path, args.sensor_size, args.bin_ms, max_gap_s=args.max_gap_s,
+                                    max_span_s=args.max_span_s)
+            check_frame_size(*src.shape, n_models=1, what=path, binning=True)  # as `run` would with one model
             n_bins = sum(1 for _ in src.counts())
         except UserError as e:
             print(f"error: {e}", file=sys.stderr)
@@ -133,7 +139,18 @@ def _outputs(args) -> list[Path]:
         return Path(spec).stem
     names = unique_names(list(args.inputs), [name(s) for s in args.inputs])
     ext = ".h5" if args.format == "h5" else ".npy"
-    return [Path(out) / f"{n}{ext}" for n in names]
+    return [inside(out, f"{n}{ext}") for n in names]
+
+
+def bins_note(n_frames: int, fps: float) -> str:
+    """How an emulated video's frames map to bins one frame long (``--bin-ms 1000/fps``).
+
+    Events come from the changes between frames, so ``n`` frames give ``n - 1`` bins: bin ``k``
+    holds the change from frame ``k`` to ``k + 1``, which a frame model sees at frame ``k + 1``. A
+    window of frames ``s..e`` (a labels file made for the video) is bins ``s - 1 .. e - 1``.
+    """
+    return (f"{n_frames} frames -> {max(n_frames - 1, 0)} bins of {1000.0 / fps:.4g} ms (bin k = the change from "
+            "frame k to k+1: frames s..e are bins s-1..e-1)")
 
 
 def _emulate(args) -> int:
@@ -146,12 +163,23 @@ def _emulate(args) -> int:
         raise UserError(str(e)) from None
     outputs = _outputs(args)
     ok = failed = 0
-    for spec, out in zip(args.inputs, outputs):
+    # progress: a frame bar in a terminal; in a log (stderr not a terminal) one line per finished input
+    bar, log = (not args.no_progress and _isatty(sys.stderr)), (not args.no_progress and not _isatty(sys.stderr))
+    for k, (spec, out) in enumerate(zip(args.inputs, outputs), start=1):
+        t0 = time.perf_counter()
         try:
             src = resolve_input(spec, fps=args.fps, color_order=args.color_order)
             h, w = src.shape
-            chunks = emulate(iter_grey(src), src.fps, params, seed=args.seed)
-            if not args.no_progress:
+            check_frame_size(h, w, n_models=0, what=str(spec), emulating=True)
+            frames = [0]  # frames read
+
+            def counted_frames(src=src, frames=frames):
+                for g in iter_grey(src):
+                    frames[0] += 1
+                    yield g
+
+            chunks = emulate(counted_frames(), src.fps, params, seed=args.seed)
+            if bar:
                 chunks = tqdm(chunks, total=None if src.n_frames is None else max(src.n_frames - 1, 0),
                               desc=f"{spec} -> events", unit="frame", leave=False)
             counts = [0, 0]  # events, ON events
@@ -167,9 +195,13 @@ def _emulate(args) -> int:
             print(f"error: {e}", file=sys.stderr)
             failed += 1
             continue
+        finally:
+            if log:
+                print(f"[{k}/{len(outputs)}] {spec} -> {out}: {time.perf_counter() - t0:.1f} s", file=sys.stderr,
+                      flush=True)
         n, n_on = counts
         print(f"{spec} -> {out}: {n} events ({n_on} ON, {n - n_on} OFF), {w}x{h}, "
-              f"{src.fps:g} fps")
+              f"{src.fps:g} fps; {bins_note(frames[0], src.fps)}")
         ok += 1
     if ok and failed:
         return EXIT_FAILED

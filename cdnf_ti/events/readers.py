@@ -12,7 +12,9 @@ Formats (recognised by content first, then by extension):
                    ``ms_to_idx`` (not needed to read); ``h5py`` and, for DSEC's Blosc-compressed
                    files, ``hdf5plugin``; sensor size from root attributes ``width``/``height``
                    when present
-``.npy``           a structured array with fields ``t`` (µs), ``x``, ``y``, ``p`` (read memory-mapped)
+``.npy``           a structured array with fields ``t`` (µs), ``x``, ``y``, ``p`` (read memory-mapped);
+                   ``t`` is in ms when a ``sim_data.npz`` with ``t_end`` and ``dt`` sits beside it
+                   (the layout of Schubert et al.'s looming data sets, ``p`` 0 or 1)
 ``.npz``           the same fields as four arrays ``t``, ``x``, ``y``, ``p``, or one structured
                    array (an ``.npz`` is read whole: zip members cannot be memory-mapped)
 =================  ===========================================================================
@@ -23,7 +25,10 @@ smallest that holds every event (one extra pass over the file; a note says so).
 """
 from __future__ import annotations
 
+import contextlib
 import os
+import sys
+import tempfile
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -156,13 +161,49 @@ def open_events(path: str | os.PathLike) -> EventFile:
     return opener(path)
 
 
-def to_events(t, x, y, p) -> np.ndarray:
-    """Columns -> a structured chunk (``t`` rounded to whole µs, ``p > 0`` -> 1)."""
-    out = np.empty(len(t), dtype=EVENT_DTYPE)
+def to_events(t, x, y, p, path: str = "", start: int = 0) -> np.ndarray:
+    """Columns -> a structured chunk (``t`` rounded to whole µs, ``p > 0`` -> 1).
+
+    Parameters
+    ----------
+    t, x, y, p : array-like, shape (n,)
+        Timestamps (µs, integer or float), pixel column and row, polarity.
+    path : str
+        The recording, for messages.
+    start : int
+        Index of the chunk's first event in the file (from 0), for messages.
+
+    Raises
+    ------
+    InputError
+        A timestamp that is not a finite number of µs within int64, or a pixel coordinate outside
+        0..65535 (naming the first such event).
+    """
     t = np.asarray(t)
-    out["t"] = np.rint(t) if t.dtype.kind == "f" else t
-    out["x"] = x
-    out["y"] = y
+    out = np.empty(len(t), dtype=EVENT_DTYPE)
+    if t.dtype.kind == "f":
+        bad = ~np.isfinite(t) | (np.abs(t) >= 2.0 ** 63)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise InputError(path, f"event {start + i} has timestamp {float(t[i])}, not a whole number of µs")
+        out["t"] = np.rint(t)
+    elif t.dtype.kind in "iub":
+        if t.dtype.kind == "u" and t.dtype.itemsize == 8 and t.size and int(t.max()) >= 2 ** 63:
+            i = int(np.argmax(t >= 2 ** 63))
+            raise InputError(path, f"event {start + i} has timestamp {int(t[i])} us, past the largest int64")
+        out["t"] = t
+    else:
+        raise InputError(path, f"timestamps must be numbers (µs), got {t.dtype}")
+    for name, v in (("x", x), ("y", y)):
+        v = np.asarray(v)
+        if v.dtype.kind not in "iub":
+            if v.dtype.kind != "f" or not (np.isfinite(v) & (v == np.floor(v))).all():
+                raise InputError(path, f"column {name} must hold whole pixel numbers, got {v.dtype} values")
+        if v.size and (v.min() < 0 or v.max() > 65535):
+            i = int(np.argmax((v < 0) | (v > 65535)))
+            raise InputError(path, f"event {start + i} has {name}={v[i].item()}, outside 0..65535 (a pixel coordinate "
+                                   "cannot be negative)")
+        out[name] = v
     out["p"] = np.asarray(p) > 0
     return out
 
@@ -174,6 +215,23 @@ def _check_columns(path: str, names, where: str) -> None:
 
 
 # -- NumPy ---------------------------------------------------------------------------------------
+#: The metadata file beside an ``.npy`` whose ``t`` is in ms (Schubert et al.'s sequences:
+#: ``events.npy`` and ``sim_data.npz`` with ``t_end`` and ``dt`` in ms, among others).
+MS_SIDECAR = "sim_data.npz"
+
+
+def times_in_ms(path: str | os.PathLike) -> bool:
+    """Whether the ``.npy`` at ``path`` has ``t`` in ms: a :data:`MS_SIDECAR` with ``t_end`` and ``dt`` beside it."""
+    sidecar = Path(path).with_name(MS_SIDECAR)
+    if not sidecar.is_file():
+        return False
+    try:
+        with np.load(sidecar, allow_pickle=False) as z:
+            return {"t_end", "dt"} <= set(z.files)
+    except Exception:  # noqa: BLE001 - an unreadable sidecar is no sidecar: t stays in µs
+        return False
+
+
 def _open_npy(path: str) -> EventFile:
     try:
         arr = np.load(path, mmap_mode="r", allow_pickle=False)
@@ -186,15 +244,21 @@ def _open_npy(path: str) -> EventFile:
     if arr.ndim != 1:
         raise InputError(path, f"event array must be one-dimensional, got shape {arr.shape}")
 
+    us_per_tick = 1000 if times_in_ms(path) else 1
+
     def gen() -> Iterator[np.ndarray]:
         for i in range(0, arr.shape[0], CHUNK_EVENTS):
             c = arr[i:i + CHUNK_EVENTS]
-            yield to_events(c["t"], c["x"], c["y"], c["p"])
+            t = c["t"] if us_per_tick == 1 else np.asarray(c["t"], dtype=np.float64) * us_per_tick
+            yield to_events(t, c["x"], c["y"], c["p"], path, i)
 
     return EventFile(path, "npy", None, int(arr.shape[0]), gen, t_start=0)
 
 
 def _open_npz(path: str) -> EventFile:
+    if not zipfile.is_zipfile(path):
+        raise InputError(path, "not a NumPy .npz archive (no zip directory found: corrupt, truncated or another "
+                               "kind of file)")
     try:
         z = np.load(path, allow_pickle=False)
         names = list(z.files)
@@ -222,7 +286,7 @@ def _open_npz(path: str) -> EventFile:
         if any(len(c) != n for c in cols):
             raise InputError(path, f"columns t, x, y, p differ in length ({', '.join(str(len(c)) for c in cols)})")
         for i in range(0, n, CHUNK_EVENTS):
-            yield to_events(*(c[i:i + CHUNK_EVENTS] for c in cols))
+            yield to_events(*(c[i:i + CHUNK_EVENTS] for c in cols), path, i)
 
     return EventFile(path, "npz", None, None, gen, t_start=0)
 
@@ -255,8 +319,12 @@ def _open_hdf5(path: str) -> EventFile:
             t_start = int(np.asarray(f["t_offset"][()]).item()) if "t_offset" in f else 0
             if "width" in f.attrs and "height" in f.attrs:
                 size = (int(f.attrs["width"]), int(f.attrs["height"]))
-    except OSError as e:
-        raise InputError(path, f"cannot read as HDF5 ({e})".splitlines()[0]) from None
+    except InputError:
+        raise
+    except BaseException as e:  # noqa: BLE001 - HDF5's errors on a corrupt file come as many types
+        if not decoder_failure(e):
+            raise
+        raise InputError(path, f"cannot read as HDF5 ({type(e).__name__}: {e})".splitlines()[0]) from None
     if len(set(lengths.values())) > 1:
         raise InputError(path, "events/t, x, y, p differ in length (" +
                          ", ".join(f"{k} {v}" for k, v in lengths.items()) + ")")
@@ -268,25 +336,70 @@ def _open_hdf5(path: str) -> EventFile:
             for i in range(0, n, CHUNK_EVENTS):
                 try:
                     cols = [g[k][i:i + CHUNK_EVENTS] for k in _FIELDS]
-                except OSError as e:
+                except BaseException as e:  # noqa: BLE001 - as on opening
+                    if not decoder_failure(e):
+                        raise
                     raise InputError(path, f"cannot read events {i} to {min(n, i + CHUNK_EVENTS) - 1} "
                                            f"(corrupt or truncated HDF5: {e})".splitlines()[0]) from None
-                cols[0] = cols[0].astype(np.int64) + t_offset
-                yield to_events(*cols)
+                if cols[0].dtype.kind in "iu":
+                    cols[0] = cols[0].astype(np.int64) + t_offset
+                else:
+                    cols[0] = cols[0] + t_offset
+                yield to_events(*cols, path, i)
 
     return EventFile(path, "hdf5", size, n, gen, t_start=t_start)
 
 
 # -- AEDAT 4 -------------------------------------------------------------------------------------
+def decoder_failure(e: BaseException) -> bool:
+    """Whether ``e``, raised by a decoder of a recording, means a bad file: anything but an interrupt or an exit.
+
+    A compiled decoder signals a corrupt file in ways ``except Exception`` misses: the ``aedat``
+    package raises ``pyo3_runtime.PanicException`` (a ``BaseException``) when its Rust code panics.
+    """
+    return not isinstance(e, (KeyboardInterrupt, SystemExit, GeneratorExit))
+
+
+@contextlib.contextmanager
+def _panic_text_hidden():
+    """Send file descriptor 2 to a scratch file while a compiled decoder runs, so that a Rust panic's own
+    lines (``thread ... panicked at ...``) do not reach stderr: the error line says what happened."""
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):  # no stderr, or not a file descriptor
+        yield
+        return
+    try:
+        with tempfile.TemporaryFile() as scratch:
+            os.dup2(scratch.fileno(), 2)
+            try:
+                yield
+            finally:
+                os.dup2(saved, 2)
+    finally:
+        os.close(saved)
+
+
+def _aedat_error(path: str, e: BaseException, where: str) -> InputError:
+    text = (str(e).splitlines() or [""])[0] or type(e).__name__
+    if type(e).__name__ == "PanicException":
+        text = f"the decoder failed: {text}"
+    return InputError(path, f"{where} ({text})")
+
+
 def _open_aedat4(path: str) -> EventFile:
     try:
         import aedat
     except ImportError:
         raise InputError(path, f"reading AEDAT4 needs the aedat package ({_INSTALL})") from None
     try:
-        streams = aedat.Decoder(path).id_to_stream()
-    except Exception as e:  # noqa: BLE001 - the decoder's errors are all about the file
-        raise InputError(path, f"bad AEDAT4 header ({e})".splitlines()[0]) from None
+        with _panic_text_hidden():
+            streams = aedat.Decoder(path).id_to_stream()
+    except BaseException as e:  # noqa: BLE001 - the decoder's errors (panics too) are all about the file
+        if not decoder_failure(e):
+            raise
+        raise _aedat_error(path, e, "bad AEDAT4 header") from None
     ids = sorted(i for i, s in streams.items() if s.get("type") == "events")
     if not ids:
         raise InputError(path, "AEDAT4 file has no event stream")
@@ -295,20 +408,28 @@ def _open_aedat4(path: str) -> EventFile:
 
     def gen() -> Iterator[np.ndarray]:
         n = 0
-        decoder = aedat.Decoder(path)
+        try:
+            with _panic_text_hidden():
+                decoder = aedat.Decoder(path)
+        except BaseException as e:  # noqa: BLE001 - as above
+            if not decoder_failure(e):
+                raise
+            raise _aedat_error(path, e, "bad AEDAT4 header") from None
         while True:
             try:
-                packet = next(decoder)
+                with _panic_text_hidden():
+                    packet = next(decoder)
             except StopIteration:
                 return
-            except Exception as e:  # noqa: BLE001 - truncated or corrupt packet
-                raise InputError(path, f"truncated or corrupt AEDAT4 data after event {n} ({e})".splitlines()[0]) \
-                    from None
+            except BaseException as e:  # noqa: BLE001 - a truncated or corrupt packet, or a panic on one
+                if not decoder_failure(e):
+                    raise
+                raise _aedat_error(path, e, f"truncated or corrupt AEDAT4 data after event {n}") from None
             if packet.get("stream_id") != sid or "events" not in packet:
                 continue
             e = packet["events"]
+            yield to_events(e["t"], e["x"], e["y"], e["on"], path, n)
             n += e.shape[0]
-            yield to_events(e["t"], e["x"], e["y"], e["on"])
 
     return EventFile(path, "aedat4", size, None, gen)
 

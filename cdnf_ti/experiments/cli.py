@@ -45,12 +45,14 @@ from ..render import render_dataset
 from ..stimuli.basic import BASIC_STIMULI
 from ..stimuli.incoherent import SCATTERS
 from . import builtin
+from .benchmark_formats import FORMATS
 from .dataset import run_dataset
 from .labels import drop_missing, find_clip, read_labels
 from .paramsweep import run_param_sweep
 from .reports import pct, table2_markdown
 from .scoring import Padding
 from .selectivity import agreement_markdown, selectivity_sweep
+from .tune import run_tune
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 
@@ -143,16 +145,22 @@ def _dataset(args, folder: Path, out: Path) -> int:
     models = parse_models(args.models)
     check_model_options(args)
     params = params_from_args(args, models)
-    _skip_missing(args, folder)
-    _note_event_options(args, folder)
+    fmt = getattr(args, "format", "labels")
+    if fmt == "labels":
+        _skip_missing(args, folder)
+        _note_event_options(args, folder)
+    elif getattr(args, "render", False):
+        raise UserError(f"--render works with --format labels only (not {fmt})")
     run = run_dataset(folder, args.labels, out, models=models, rain=RAIN_ENGINE_WORD[args.rain],
                       padding=Padding(args.pad_before, args.pad_after), seed=rain_seed_of(args),
                       workers=args.workers, scheduler=args.scheduler, backend=args.backend, arch=args.arch,
                       progress=not args.no_progress, figures=not args.no_figures, rain_params=_rain_params(args),
                       params=params, fps=args.fps, color_order=args.color_order, skip_missing=args.skip_missing,
-                      events=event_options_of(args))
+                      events=event_options_of(args), fmt=fmt, split=getattr(args, "split", None))
     print(table2_markdown(run.summary["results"], run.models, run.conditions))
     for line in headline(run):
+        print(line)
+    for line in benchmark_headline(run):
         print(line)
     print(f"{len(run.labels)} clips x {len(run.models)} models x {len(run.conditions)} conditions: "
           f"{run.ran} run now, {run.skipped} reused; results in {out}/ (results.csv, summary.md)")
@@ -190,6 +198,24 @@ def headline(run) -> list[str]:
     return lines
 
 
+def benchmark_headline(run) -> list[str]:
+    """One line per model and condition: the benchmark's headline metric with its interval, and the median
+    lead time before the event in seconds (summary.md, "Benchmark scores", has the rest)."""
+    bench = run.summary.get("benchmark") or {}
+    lines = []
+    for m, per in (bench.get("results") or {}).items():
+        for c, d in per.items():
+            h, lt = d["headline"], d["lead_times"]
+            val = "n/a" if h["value"] is None else f"{h['value']:.3f}"
+            if h["value"] is not None and h["ci_lo"] is not None:
+                val += f" [{h['ci_lo']:.3f}, {h['ci_hi']:.3f}]"
+            med = "n/a" if lt["median_s"] is None else f"{lt['median_s']:+.2f} s"
+            alerted = lt["positive_clips"] - lt["never_alerted"]
+            lines.append(f"{m}, {c}: {bench['format']} {bench['headline']} {val}; median lead time {med} "
+                         f"over {alerted} of {lt['positive_clips']} positive clip(s)")
+    return lines
+
+
 def _param_sweep(args) -> int:
     models = parse_models(args.models)
     if len(models) != 1:
@@ -216,6 +242,29 @@ def _param_sweep(args) -> int:
     return EXIT_FAILED if run.errors else EXIT_OK
 
 
+def _tune(args) -> int:
+    """``experiment tune``: checks the options, runs :func:`~.tune.run_tune`, prints tune.md."""
+    check_model_options(args)
+    models = parse_models(args.models)
+    if len(models) != 1:
+        raise UserError("experiment tune takes exactly one --model (its parameters are searched)")
+    if args.rain != "off":
+        raise UserError("experiment tune scores the clean clips; leave out --rain")
+    folder = Path(args.folder)
+    if not folder.is_dir():
+        raise InputError(folder, "dataset folder not found")
+    with output_lock(prepare_output(args.out)):
+        res = run_tune(folder, args.labels, Path(args.out), models[0], args.param, trials=args.trials,
+                       folds=args.folds, seed=rain_seed_of(args), padding=Padding(args.pad_before, args.pad_after),
+                       workers=args.workers, scheduler=args.scheduler, backend=args.backend, arch=args.arch,
+                       progress=not args.no_progress, downscale=args.downscale, fps=args.fps,
+                       color_order=args.color_order, skip_missing=args.skip_missing, events=event_options_of(args))
+    print((Path(args.out) / "tune.md").read_text(encoding="utf-8"))
+    for e in res["errors"]:
+        print(f"error: {e.get('error')} [{e.get('key')}]", file=sys.stderr)
+    return EXIT_FAILED if res["errors"] else EXIT_OK
+
+
 def dataset_main(argv: Sequence[str]) -> int:
     """``python -m cdnf_ti.run dataset DIR --labels CSV --out OUT [...]``."""
     ap = ArgumentParser(
@@ -225,11 +274,19 @@ def dataset_main(argv: Sequence[str]) -> int:
                     "them (docs/EVALUATION.md) and write traces, results.csv, summary.md/json and "
                     "figures. Rerunning with the same OUT skips finished work.")
     ap.add_argument("folder", metavar="DIR",
-                    help="folder of videos and/or event recordings (README, 'Event cameras': a recording's frames "
+                    help="folder of videos and/or event recordings (docs/EVENTS.md: a recording's frames "
                          "are its bins of --bin-ms, and its labels count bins)")
     add_output_option(ap, default="cdnf_out/dataset")
     ap.add_argument("--render", action="store_true",
                     help="also write a field movie of each scored clip and model (OUT/movies/<clip>.<model>.mp4)")
+    ap.add_argument("--format", choices=FORMATS, default="labels",
+                    help="layout of DIR: cdnf_ti's labels.csv (default) or a public benchmark's as distributed: "
+                         "nexar (train.csv, train/<id>.mp4), ccd (Crash-1500.txt, Crash-1500/, Normal/), dad "
+                         "(videos/{training,testing}/{positive,negative}/), dota (annotations/*.json, frames/); "
+                         "--labels then names its annotation file when it is elsewhere (docs/EVALUATION.md)")
+    ap.add_argument("--split", default=None,
+                    help="the benchmark's split: dad training|testing, dota train|val (its metadata_<split>.json); "
+                         "default: every clip")
     _add_dataset_options(ap, rain_default="off")
     args = ap.parse_args(list(argv))
     folder = Path(args.folder)
@@ -269,7 +326,8 @@ def experiment_main(argv: Sequence[str]) -> int:
     """``python -m cdnf_ti.run experiment table1|coherence|selectivity|table2 [...]``."""
     ap = ArgumentParser(prog="python -m cdnf_ti.run experiment",
                         description="Regenerate the paper's experiments.")
-    sub = ap.add_subparsers(dest="which", required=True, metavar="{table1,coherence,selectivity,table2,sweep}")
+    sub = ap.add_subparsers(dest="which", required=True,
+                            metavar="{table1,coherence,selectivity,table2,sweep,tune}")
     on_frames = ("It runs on frames drawn in memory; for the event versions of the stimuli, emulate them "
                  "('python -m cdnf_ti.run events stim:NAME --out DIR') and run the recordings with 'run' or "
                  "'dataset'.")
@@ -329,7 +387,22 @@ def experiment_main(argv: Sequence[str]) -> int:
                     help="resize every frame by this factor in (0, 1] (default 1: native size)")
     p4.add_argument("--no-html", action="store_true", help="do not write report.html")
     _add_dataset_options(p4, rain_default="off", one_model=True)
+    p5 = sub.add_parser("tune", help="ONE model's parameters searched by Optuna (TPE, seeded) inside nested "
+                                     "cross-validation: out-of-sample accuracy and what each fold chose")
+    p5.add_argument("folder", metavar="DIR", help="folder of videos and/or event recordings with labels.csv")
+    add_output_option(p5, default="cdnf_experiments/tune")
+    p5.add_argument("--param", action="append", default=[], metavar="NAME=SPEC",
+                    help="a parameter and its search space: NAME=LO:HI (uniform), NAME=LO:HI:log or NAME=V1,V2,... "
+                         "(a choice); repeat for several")
+    p5.add_argument("--trials", type=_nonneg_int, default=20, help="Optuna trials per outer fold (default 20)")
+    p5.add_argument("--folds", type=_nonneg_int, default=0,
+                    help="outer (and inner) cross-validation folds (default 0: leave-one-out)")
+    p5.add_argument("--downscale", type=float, default=1.0,
+                    help="resize every frame by this factor in (0, 1] (default 1: native size)")
+    _add_dataset_options(p5, rain_default="off", one_model=True)
     args = ap.parse_args(list(argv))
+    if args.which == "tune":
+        return _tune(args)
 
     if args.which in ("sweep", "selectivity"):
         check_model_options(args)

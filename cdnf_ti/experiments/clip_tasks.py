@@ -28,13 +28,14 @@ from typing import Any, Callable, Sequence
 import cv2
 
 from ..errors import InputError, UserError
-from ..events.binning import DEFAULT_BIN_MS, DEFAULT_EVENT_THRESHOLD
+from ..events.binning import DEFAULT_BIN_MS, DEFAULT_EVENT_THRESHOLD, DEFAULT_MAX_GAP_S, DEFAULT_MAX_SPAN_S
 from ..events.readers import is_event_file, open_events
 from ..events.source import EventSource, open_event_source
 from ..frames import iter_grey, open_source
 from ..limits import check_frame_size
 from ..models import create_model, get_model_class
 from ..models.base import NotConvergedWarning, run_models
+from ..paths import inside
 from ..stimuli.rain import RainParams, RainyFrames
 from .labels import ClipLabel
 from .layout import fingerprint, rain_seed, trace_entry
@@ -76,6 +77,9 @@ class ClipTask:
     sensor_size, bin_ms, event_threshold :
         How an event recording is binned and scaled (``--sensor-size``, ``--bin-ms``,
         ``--event-threshold``); unused for a video. An event clip's fingerprints hold all three.
+    max_gap_s, max_span_s :
+        Corrupt-timestamp limits of an event recording (``--max-gap-s``, ``--max-span-s``); not in
+        the fingerprint (a recording within them bins the same whatever they are).
     """
 
     clip: str
@@ -96,6 +100,8 @@ class ClipTask:
     sensor_size: tuple[int, int] | None = None
     bin_ms: float = DEFAULT_BIN_MS
     event_threshold: float = DEFAULT_EVENT_THRESHOLD
+    max_gap_s: float = DEFAULT_MAX_GAP_S
+    max_span_s: float = DEFAULT_MAX_SPAN_S
 
     @property
     def events(self) -> bool:
@@ -163,7 +169,8 @@ def _open(task: ClipTask):
     if task.events:
         if task.condition != "clean":
             raise InputError(task.path, "is an event recording; --rain applies to frames only")
-        return open_event_source(task.path, task.sensor_size, task.bin_ms, quiet=True)
+        return open_event_source(task.path, task.sensor_size, task.bin_ms, quiet=True, max_gap_s=task.max_gap_s,
+                                 max_span_s=task.max_span_s)
     return open_source(task.path, fps=task.fps, color_order=task.color_order)
 
 
@@ -215,7 +222,8 @@ def run_clip_task(task: ClipTask) -> list[dict]:
     try:
         src = _open(task)
         try:
-            check_frame_size(*src.shape, n_models=len(task.models), what=str(task.path))
+            check_frame_size(*src.shape, n_models=len(task.models), what=str(task.path),
+                             binning=isinstance(src, EventSource))
         except UserError as e:  # frames smaller than the widest kernel: that clip's error rows
             raise InputError(task.path, str(e).split(": ", 1)[-1]) from None
     except InputError as e:
@@ -291,7 +299,8 @@ def run_clips(clips: Sequence[tuple[str, str]], out: str | os.PathLike, models: 
               backend: str = "taichi", arch: str = "cpu", progress: bool = True, rain_params: dict | None = None,
               on_record: Callable[[dict], None] | None = None, params: dict | None = None, fps: float | None = None,
               color_order: str = "bgr", sensor_size: tuple[int, int] | None = None, bin_ms: float = DEFAULT_BIN_MS,
-              event_threshold: float = DEFAULT_EVENT_THRESHOLD) -> tuple[dict[tuple[str, str, str], dict], CachedRun]:
+              event_threshold: float = DEFAULT_EVENT_THRESHOLD, max_gap_s: float = DEFAULT_MAX_GAP_S,
+              max_span_s: float = DEFAULT_MAX_SPAN_S) -> tuple[dict[tuple[str, str, str], dict], CachedRun]:
     """Every clip x condition x model, reusing finished traces (the dataset engine).
 
     Parameters
@@ -303,9 +312,9 @@ def run_clips(clips: Sequence[tuple[str, str]], out: str | os.PathLike, models: 
     models, conditions : sequence of str
     seed, workers, scheduler, backend, arch, progress, rain_params, params, fps, color_order
         As :func:`cdnf_ti.experiments.dataset.run_dataset`.
-    sensor_size, bin_ms, event_threshold
+    sensor_size, bin_ms, event_threshold, max_gap_s, max_span_s
         How the clips that are event recordings are binned (``--sensor-size``, ``--bin-ms``,
-        ``--event-threshold``).
+        ``--event-threshold``, ``--max-gap-s``, ``--max-span-s``).
     on_record : callable, optional
         Called in this process with each record computed now (after a ``warning:`` line on stderr
         for each problem found while binning an event recording).
@@ -322,7 +331,8 @@ def run_clips(clips: Sequence[tuple[str, str]], out: str | os.PathLike, models: 
                 keys.append((clip, m, cond))
                 tasks.append(ClipTask(clip, str(path), cond, (m,), str(out), seed, backend, arch, rain_params,
                                       params=params, fps=fps, color_order=color_order, sensor_size=sensor_size,
-                                      bin_ms=bin_ms, event_threshold=event_threshold))
+                                      bin_ms=bin_ms, event_threshold=event_threshold, max_gap_s=max_gap_s,
+                                      max_span_s=max_span_s))
 
     def plan(todo: list[int]) -> list[tuple[ClipTask, list[int]]]:
         groups: dict[tuple[str, str], list[int]] = {}
@@ -423,8 +433,9 @@ class SweepTask:
         Frames are resized by this factor (1 = native size).
     fps, color_order :
         How the clip is read (``--fps``, ``--color-order``).
-    sensor_size, bin_ms, event_threshold :
-        How an event recording is binned (``--sensor-size``, ``--bin-ms``, ``--event-threshold``).
+    sensor_size, bin_ms, event_threshold, max_gap_s, max_span_s :
+        How an event recording is binned (``--sensor-size``, ``--bin-ms``, ``--event-threshold``,
+        ``--max-gap-s``, ``--max-span-s``).
     """
 
     clip: str
@@ -443,6 +454,8 @@ class SweepTask:
     sensor_size: tuple[int, int] | None = None
     bin_ms: float = DEFAULT_BIN_MS
     event_threshold: float = DEFAULT_EVENT_THRESHOLD
+    max_gap_s: float = DEFAULT_MAX_GAP_S
+    max_span_s: float = DEFAULT_MAX_SPAN_S
 
     @property
     def clip_task(self) -> ClipTask:
@@ -450,12 +463,13 @@ class SweepTask:
         return ClipTask(self.clip, self.path, self.condition, (self.model,), str(setting_folder(self.out, self.key)),
                         self.seed, self.backend, self.arch, None, fps=self.fps, color_order=self.color_order,
                         setting=tuple(self.setting), downscale=float(self.downscale), key=self.key,
-                        sensor_size=self.sensor_size, bin_ms=self.bin_ms, event_threshold=self.event_threshold)
+                        sensor_size=self.sensor_size, bin_ms=self.bin_ms, event_threshold=self.event_threshold,
+                        max_gap_s=self.max_gap_s, max_span_s=self.max_span_s)
 
 
 def setting_folder(out: str | os.PathLike, key: str) -> Path:
     """``OUT/settings/<key>``: where the traces of one sweep setting go."""
-    return Path(out) / "settings" / key
+    return inside(Path(out) / "settings", key)
 
 
 def task_fingerprint(task: SweepTask) -> dict:

@@ -18,13 +18,15 @@ different window padding re-scores without running any model.
 from __future__ import annotations
 
 import os
+import sys
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from ..atomic import output_lock, prepare_output, remove_stale_temps
-from ..errors import UserError
+from ..atomic import output_lock, prepare_output
+from ..errors import InputError, UserError
 from . import parallel
+from .benchmark_formats import read_benchmark
 from .clip_tasks import (
     ClipTask as ClipTask,  # re-exported: dataset.py was their home
     DatasetRun as DatasetRun,
@@ -34,7 +36,7 @@ from .clip_tasks import (
     run_clip_task as run_clip_task,
     run_clips,
 )
-from .labels import ClipLabel, drop_missing, labels_in_frames, read_labels, unlabelled_videos, validate_dataset
+from .labels import ClipLabel, labels_in_frames, load_labels, unlabelled_videos
 from .layout import (
     CONDITIONS as CONDITIONS,
     RAIN_CHOICES as RAIN_CHOICES,
@@ -62,6 +64,9 @@ def build_row(label: ClipLabel, model: str, condition: str, meta: dict | None, p
     if meta.get("error"):
         row["error"] = meta["error"]
         return row
+    if meta.get("frames") == 0:  # nothing was seen: not a correct non-collision
+        row["error"] = f"{meta.get('source') or label.clip}: holds no frames"
+        return row
     fps = float(meta.get("fps") or 30.0)
     fa = meta.get("first_alert")
     sc = score_clip(fa, label, fps, padding)
@@ -84,7 +89,7 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
                 rain_params: dict | None = None,
                 on_record: Callable[[dict], None] | None = None, params: dict | None = None,
                 fps: float | None = None, color_order: str = "bgr", skip_missing: bool = False,
-                events: dict | None = None) -> DatasetRun:
+                events: dict | None = None, fmt: str = "labels", split: str | None = None) -> DatasetRun:
     """Run ``models`` on every labelled clip of ``folder`` and write the reports.
 
     Parameters
@@ -130,6 +135,11 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
         How event recordings are binned: ``sensor_size``, ``bin_ms``, ``event_threshold``
         (:func:`cdnf_ti.cli_common.event_options_of`; default: the defaults). Rain applies to
         frames only (:func:`~.clip_tasks.frames_only_conditions`).
+    fmt : {"labels", "nexar", "ccd", "dad", "dota"}
+        The folder's layout: cdnf_ti's labels CSV, or a public benchmark's as distributed
+        (:mod:`.benchmark_formats`; ``labels_path`` then names its annotation file, if not at its place).
+    split : str, optional
+        The benchmark's split (DAD ``training``/``testing``, DoTA ``train``/``val``; default: all clips).
 
     Raises
     ------
@@ -143,12 +153,14 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
     if rain not in RAIN_CHOICES:
         raise UserError(f"--rain must be one of {', '.join(RAIN_CHOICES)}, got {rain!r}")
     folder = Path(folder)
-    labels_path = Path(labels_path) if labels_path is not None else folder / "labels.csv"
-    labels = read_labels(labels_path)
-    if skip_missing:
-        labels, _ = drop_missing(labels, folder)
-    files = validate_dataset(labels, folder, labels_path)
-    labels = labels_in_frames(labels, files, fps, (events or {}).get("bin_ms"), labels_path)
+    annotations = None
+    if fmt == "labels":
+        labels_path = Path(labels_path) if labels_path is not None else folder / "labels.csv"
+        labels, files = load_labels(labels_path, folder, fps, (events or {}).get("bin_ms"), skip_missing)
+    else:
+        annotations, labels, files, fps = benchmark_labels(fmt, folder, labels_path, split, skip_missing, fps)
+        labels_path = Path(labels_path) if labels_path is not None else folder
+        labels = labels_in_frames(labels, files, fps, (events or {}).get("bin_ms"), labels_path)
     conditions = frames_only_conditions(files, RAIN_CHOICES[rain], folder)
     note_inferred_sensor_size(files, (events or {}).get("sensor_size"))
     models = list(dict.fromkeys(models))
@@ -156,29 +168,57 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
         raise UserError("no model named")
     out = prepare_output(out)  # before any work: a folder that cannot be written fails now
     files = {clip: Path(f).resolve() for clip, f in files.items()}  # workers may run elsewhere
-    with output_lock(out):
-        remove_stale_temps(out)  # left by a run killed mid-write
-        try:
-            return _run_locked(folder, labels_path, labels, files, out, models, conditions, padding, seed,
-                               workers, scheduler, backend, arch, progress, figures, rain_params, on_record,
-                               dict(params=params, fps=fps, color_order=color_order, **(events or {})))
-        except KeyboardInterrupt:
-            parallel.stop_all_pools()
-            remove_stale_temps(out)  # the workers stopped mid-write leave no half-written files
-            raise
+    with output_lock(out), parallel.cleaned_up(out):
+        return _run_locked(folder, labels_path, labels, files, out, models, conditions, padding, seed,
+                           workers, scheduler, backend, arch, progress, figures, rain_params, on_record,
+                           dict(params=params, fps=fps, color_order=color_order, **(events or {})),
+                           fmt, annotations)
 
 
 def _run_locked(folder, labels_path, labels, files, out, models, conditions, padding, seed, workers, scheduler,
-                backend, arch, progress, figures, rain_params, on_record, read: dict | None = None) -> DatasetRun:
+                backend, arch, progress, figures, rain_params, on_record, read: dict | None = None,
+                fmt: str = "labels", annotations: dict | None = None) -> DatasetRun:
     metas, done = run_clips([(lab.clip, files[lab.clip]) for lab in labels], out, models, conditions, seed,
                             workers, scheduler, backend, arch, progress, rain_params, on_record, **(read or {}))
     rows = [build_row(lab, m, c, metas.get((lab.clip, m, c)), padding)
             for lab in labels for c in conditions for m in models]
     result = DatasetRun(rows, labels, models, conditions, padding, out, done.ran, done.reused,
-                        unlabelled=unlabelled_videos(folder, labels))
+                        unlabelled=unlabelled_videos(folder, labels) if fmt == "labels" else [])
     write_reports(result, dataset=str(folder), labels_path=str(labels_path), seed=seed, figures=figures,
-                  progress=progress)
+                  progress=progress, fmt=fmt, annotations=annotations)
     return result
+
+
+def benchmark_labels(fmt: str, folder: Path, annotation: str | os.PathLike | None, split: str | None,
+                     skip_missing: bool, fps: float | None) -> tuple[dict, list[ClipLabel], dict, float | None]:
+    """A benchmark folder's annotations (:func:`~.benchmark_formats.read_benchmark`) as the dataset engine
+    takes them: ``(annotations by clip, labels, files by clip, fps)``.
+
+    The labels are :meth:`~.annotations.Annotation.to_clip_label`; ``fps`` is ``--fps``, else the rate the
+    benchmark states when its clips are image folders (DoTA: 10 fps), else None (each video's own).
+
+    Raises
+    ------
+    InputError
+        A bad annotation file; an annotated video that is absent (unless ``skip_missing``: then a
+        ``note:`` lists them and they are left out).
+    """
+    anns = read_benchmark(fmt, folder, annotation, split)
+    missing = [a for a in anns if a.path is None]
+    if missing and not skip_missing:
+        shown = ", ".join(a.clip for a in missing[:5]) + (", ..." if len(missing) > 5 else "")
+        raise InputError(missing[0].source, f"{len(missing)} annotated clip(s) have no video in {folder}: {shown} "
+                                            "(hint: --skip-missing runs the clips that are there)")
+    if missing:
+        print(f"note: --skip-missing: {len(missing)} annotated clip(s) have no video in {folder} and are left out",
+              file=sys.stderr)
+    anns = [a for a in anns if a.path is not None]
+    if not anns:
+        raise InputError(folder, "no annotated clip has its video here")
+    if fps is None and all(a.path.is_dir() for a in anns) and anns[0].fps:
+        fps = anns[0].fps
+    labels = [a.to_clip_label(row=i + 1) for i, a in enumerate(anns)]
+    return {a.clip: a for a in anns}, labels, {a.clip: a.path for a in anns}, fps
 
 
 def config_dict(**kw: Any) -> dict:

@@ -20,6 +20,7 @@ from tqdm import tqdm
 from ..atomic import atomic_write, atomic_write_text
 from ..models import get_model_class
 from ..paper import TABLE2
+from ..paths import inside
 from .clipscores import roc_envelope
 from .layout import trace_path
 
@@ -98,6 +99,7 @@ def plot_clip(path: str | os.PathLike, label: "ClipLabel", traces: Mapping[tuple
         Shows the padded window (lighter) around the labelled one.
     """
     plt = _plt()
+    traces = {k: tr for k, tr in traces.items() if tr is not None and tr.n_frames}  # an empty trace: no trace
     panels: list[tuple[str, str]] = []
     for m in models:
         panels.append((m, "output"))
@@ -298,6 +300,17 @@ def plot_lead_times(path: str | os.PathLike, scores: Mapping[str, Mapping[str, M
     return save_figure(fig, path)
 
 
+#: Gap (accuracy points) between a bar's value label and what is under it: the bar's top or the paper's
+#: diamond, whichever is higher (a diamond is about 1.5 points tall from its centre in accuracy.png).
+LABEL_GAP = 3.0
+
+
+def value_label_y(value: float, paper: float | None) -> float:
+    """Where a bar's value label starts (its bottom, accuracy %): above the bar and above the paper's
+    diamond of that bar, so the diamond never hides the label."""
+    return max(value, paper if paper is not None else value) + LABEL_GAP
+
+
 def plot_accuracy(path: str | os.PathLike, results: Mapping[str, Mapping[str, Mapping | None]],
                   models: Sequence[str], conditions: Sequence[str]) -> Path:
     """Bars: accuracy per model and condition; diamonds: the paper's Table II."""
@@ -309,16 +322,16 @@ def plot_accuracy(path: str | os.PathLike, results: Mapping[str, Mapping[str, Ma
         vals = [100 * ((results[m].get(c) or {}).get("accuracy") or 0.0) for m in models]
         xs = x - 0.4 + w * (k + 0.5)
         ax.bar(xs, vals, w * 0.9, color=COND_STYLE.get(c, {}).get("color"), label=f"this run: {c}")
-        for xi, v in zip(xs, vals):
-            ax.text(xi, v + 1, f"{v:.0f}", ha="center", fontsize=7)
         paper = [TABLE2.get(m, {}).get(c) for m in models]
+        for xi, v, p in zip(xs, vals, paper):
+            ax.text(xi, value_label_y(v, p), f"{v:.0f}", ha="center", va="bottom", fontsize=7)
         px = [xi for xi, p in zip(xs, paper) if p is not None]
         if px:
             ax.plot(px, [p for p in paper if p is not None], "D", color="k", mfc="none", ms=6,
                     label="paper" if k == 0 else None)
     ax.set_xticks(x, models)
     ax.set_ylabel("accuracy (%)")
-    ax.set_ylim(0, 105)
+    ax.set_ylim(0, 100 + 2 * LABEL_GAP + 6)
     ax.legend(fontsize=7, loc="upper right")
     ax.grid(axis="y", alpha=0.3)
     ax.set_title("Accuracy (paper Table II: diamonds)", fontsize=10)
@@ -345,9 +358,9 @@ def dataset_figures(run: "DatasetRun", traces: Mapping, specs: Mapping, progress
               if (lab.clip, m, c) in traces}
         if not tr:
             continue
-        png = figdir / f"traces_{lab.clip}.png"
+        png = inside(figdir, f"traces_{lab.clip}.png")
         inputs = [trace_path(run.out, c, lab.clip, m) for (m, c) in tr]
-        stamp = figdir / f".traces_{lab.clip}.key"
+        stamp = inside(figdir, f".traces_{lab.clip}.key")
         key = (f"{sorted(tr)} pad={pad_tag} window={lab.window_start}-{lab.window_end} contact={lab.contact_frame} "
                f"label={lab.label} fig=3")
         if _up_to_date(png, inputs) and stamp.is_file() and stamp.read_text() == key:

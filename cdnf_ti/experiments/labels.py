@@ -23,6 +23,7 @@ from typing import Iterable
 from ..errors import InputError
 from ..events.readers import is_event_file
 from ..frames import open_source
+from ..paths import inside, name_problem
 
 #: Label values and the class each maps to (``near-miss`` counts as non-collision).
 LABEL_VALUES = {"collision": True, "non-collision": False, "noncollision": False, "non_collision": False,
@@ -30,6 +31,9 @@ LABEL_VALUES = {"collision": True, "non-collision": False, "noncollision": False
 REQUIRED_COLUMNS = ("clip", "label", "window_start", "window_end")
 #: The window in seconds from the clip's start (instead of ``window_start``, ``window_end``, ``contact_frame``).
 SECONDS_COLUMNS = ("window_start_s", "window_end_s", "contact_s")
+#: Longest clip name (bytes, UTF-8): the longest file name (255) less room for what output names add
+#: (``traces_<clip>.png``, ``<clip>.<model>.<condition>.mp4``).
+CLIP_NAME_MAX = 200
 #: File name endings tried, in order, when looking a clip up in the dataset folder.
 VIDEO_EXTENSIONS = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv", ".npy")
 
@@ -89,12 +93,15 @@ HINTS = {
     "window": "a collision clip needs window_start <= window_end (frames, inclusive)",
     "empty-window": "leave window_start and window_end empty for a non-collision clip, or label it collision",
     "clip": "give the video's file name without its extension",
+    "plain": "a clip is a file in the dataset folder: give its name without any folder part, "
+             f"at most {CLIP_NAME_MAX} bytes",
     "duplicate": "keep one row per clip (delete or merge the other)",
     "missing": "put the video in the dataset folder or fix the clip name",
     "outside": "frames are 0-based: the last frame of an N-frame video is N-1",
     "ambiguous": "write the file name with its extension in the clip column",
     "seconds": "times are seconds from the clip's start, numbers >= 0",
     "both": "give the window and contact in frames or in seconds, not both",
+    "quote": "close the quote, or remove it: a field needs quotes only when it holds a comma",
 }
 
 
@@ -140,6 +147,8 @@ def _reject(path: str, problems: list[str]) -> InputError:
 def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
     """Read and check a labels CSV (without looking at the videos).
 
+    :func:`load_labels` also checks the videos, and reports every problem of both in one message.
+
     Parameters
     ----------
     path : path-like
@@ -156,6 +165,22 @@ def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
         Missing file, missing columns, an unknown label value, a bad or missing
         window, ``window_start > window_end``, a duplicate clip, or an empty file;
         the message names the row.
+    """
+    labels, problems = _parse_labels(path)
+    if problems:
+        raise _reject(str(path), problems)
+    if not labels:
+        raise InputError(str(path), "labels file has a header but no rows")
+    return labels
+
+
+def _parse_labels(path: str | os.PathLike) -> tuple[list[ClipLabel], list[str]]:
+    """The good rows of a labels CSV and the problems of the bad ones (:func:`read_labels`).
+
+    Raises
+    ------
+    InputError
+        The file cannot be read at all: missing, a folder, empty, not UTF-8, or its header lacks columns.
     """
     path = str(path)
     p = Path(path)
@@ -183,6 +208,11 @@ def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
     seen: dict[str, int] = {}
     problems: list[str] = []
     for line, r in enumerate(rows[1:], start=2):
+        if any("\n" in c or "\r" in c for c in r):  # the rest of the file was read into one quoted field
+            problems.append(str(_bad(line, "", "a quote (\") opened in this row is never closed, so the rest of "
+                                               "the file is read as one field", "quote")))
+            break
+
         def get(name: str) -> str:
             i = col.get(name)
             return r[i] if i is not None and i < len(r) else ""  # noqa: B023 - called in this iteration only
@@ -191,15 +221,18 @@ def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
         try:
             if not clip:
                 raise _bad(line, "", "empty clip name", "clip")
+            if name_problem(clip, CLIP_NAME_MAX) is not None:
+                shown = clip if len(clip) <= 120 else clip[:60] + "..."
+                raise _bad(line, shown, f"clip name {name_problem(clip, CLIP_NAME_MAX)}", "plain")
             if clip in seen:
                 raise _bad(line, "", f"clip {clip!r} is already labelled in row {seen[clip]}", "duplicate")
             seen[clip] = line
             lab = get("label").strip()
-            key = lab.lower()
-            if key not in LABEL_VALUES:
-                raise _bad(line, clip, f"label {lab!r} is not collision, non-collision or near-miss", "label")
-            collision = LABEL_VALUES[key]
-            errs = []
+            errs = []  # every problem of the row, not only its first
+            collision = LABEL_VALUES.get(lab.lower())
+            if collision is None:
+                errs.append(str(_bad(line, clip, f"label {lab!r} is not collision, non-collision or near-miss",
+                                     "label")))
             vals = {}
             for name in ("window_start", "window_end", "contact_frame"):
                 try:
@@ -235,11 +268,7 @@ def read_labels(path: str | os.PathLike) -> list[ClipLabel]:
             continue
         labels.append(ClipLabel(clip, lab, collision, ws, we, cf, line,
                                 window_s=(ss, se) if ss is not None and se is not None else None, contact_s=cs))
-    if problems:
-        raise _reject(path, problems)
-    if not labels:
-        raise InputError(path, "labels file has a header but no rows")
-    return labels
+    return labels, problems
 
 
 def drop_missing(labels: list[ClipLabel], folder: str | os.PathLike) -> tuple[list[ClipLabel], list[str]]:
@@ -252,16 +281,19 @@ def drop_missing(labels: list[ClipLabel], folder: str | os.PathLike) -> tuple[li
 def find_clip(folder: str | os.PathLike, clip: str) -> Path | None:
     """The file (or image folder) of ``clip`` in ``folder``, or ``None``.
 
+    ``clip`` must be a plain name (:func:`cdnf_ti.paths.inside` raises
+    :class:`~cdnf_ti.paths.PathEscapeError` for one that leaves ``folder``).
+
     An exact file name wins; otherwise the first of :data:`VIDEO_EXTENSIONS`
     that exists; otherwise any file whose stem is ``clip``; otherwise a folder
     named ``clip`` (a folder of images).
     """
     folder = Path(folder)
-    exact = folder / clip
+    exact = inside(folder, clip)
     if exact.is_file():
         return exact
     for ext in VIDEO_EXTENSIONS:
-        cand = folder / f"{clip}{ext}"
+        cand = inside(folder, f"{clip}{ext}")
         if cand.exists():
             return cand
     for cand in sorted(folder.glob(f"{glob_escape(clip)}.*")):
@@ -313,7 +345,14 @@ def validate_dataset(labels: Iterable[ClipLabel], folder: str | os.PathLike,
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError(folder, "dataset folder not found")
-    lp = str(labels_path)
+    files, problems = _check_files(labels, folder)
+    if problems:
+        raise _reject(str(labels_path), problems)
+    return files
+
+
+def _check_files(labels: Iterable[ClipLabel], folder: Path) -> tuple[dict[str, Path], list[str]]:
+    """Clip -> its file for the labels whose video is found, and the problems (:func:`validate_dataset`)."""
     files: dict[str, Path] = {}
     problems: list[str] = []
     for lab in labels:
@@ -329,9 +368,7 @@ def validate_dataset(labels: Iterable[ClipLabel], folder: str | os.PathLike,
         files[lab.clip] = f
         if lab.window_start is not None or lab.contact_frame is not None:
             problems += _outside(lab, frame_count(f))
-    if problems:
-        raise _reject(lp, problems)
-    return files
+    return files, problems
 
 
 def _outside(lab: ClipLabel, n: int | None) -> list[str]:
@@ -384,6 +421,15 @@ def labels_in_frames(labels: Iterable[ClipLabel], files: dict[str, Path], fps: f
     InputError
         A window or contact time past a video's end.
     """
+    out, problems = _in_frames(labels, files, fps, bin_ms)
+    if problems:
+        raise _reject(str(labels_path), problems)
+    return out
+
+
+def _in_frames(labels: Iterable[ClipLabel], files: dict[str, Path], fps: float | None,
+               bin_ms: float | None) -> tuple[list[ClipLabel], list[str]]:
+    """The labels in frames and the problems (:func:`labels_in_frames`)."""
     out, problems = [], []
     for lab in labels:
         f = files.get(lab.clip)
@@ -406,9 +452,47 @@ def labels_in_frames(labels: Iterable[ClipLabel], files: dict[str, Path], fps: f
         lab = dataclasses.replace(lab, window_start=ws, window_end=we, contact_frame=cf)
         problems += _outside(lab, n)
         out.append(lab)
+    return out, problems
+
+
+def load_labels(labels_path: str | os.PathLike, folder: str | os.PathLike, fps: float | None = None,
+                bin_ms: float | None = None, skip_missing: bool = False) -> tuple[list[ClipLabel], dict[str, Path]]:
+    """Read a labels file and check it against the dataset folder, reporting every bad row in one pass.
+
+    :func:`read_labels`, then (``skip_missing``) :func:`drop_missing`, :func:`validate_dataset` and
+    :func:`labels_in_frames`, except that the problems of all three (a bad value, a clip with no video,
+    a window past a video's end) are collected and raised together, in row order.
+
+    Returns
+    -------
+    (list of ClipLabel, dict of str to Path)
+        The labels with every window in frames, and clip -> its file.
+
+    Raises
+    ------
+    InputError
+        The folder or the file cannot be read, or any row is bad (one message naming every bad row).
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(folder, "dataset folder not found")
+    labels, problems = _parse_labels(labels_path)
+    if skip_missing:
+        labels, _ = drop_missing(labels, folder)
+    files, missing = _check_files(labels, folder)
+    labels, outside = _in_frames(labels, files, fps, bin_ms)
+    problems = sorted(problems + missing + outside, key=_row_of)
     if problems:
         raise _reject(str(labels_path), problems)
-    return out
+    if not labels:
+        raise InputError(str(labels_path), "labels file has a header but no rows")
+    return labels, files
+
+
+def _row_of(problem: str) -> int:
+    """The row number a problem message starts with (``"row 5 (c06): ..."``)."""
+    head = problem.split(" ", 2)
+    return int(head[1].rstrip(":")) if len(head) > 1 and head[0] == "row" and head[1].rstrip(":").isdigit() else 0
 
 
 def is_clip_file(path: Path) -> bool:

@@ -12,6 +12,8 @@ import zlib
 from pathlib import Path
 from typing import Any
 
+from ..paths import inside
+from ..provenance import input_identity
 from .tasks import Entry, load_finished, report_stale as report_stale, task_fingerprint
 
 CONDITIONS = ("clean", "rain")
@@ -33,13 +35,14 @@ def rain_seed(seed: int, clip: str) -> int:
 
 
 def trace_path(out: str | os.PathLike, condition: str, clip: str, model: str, ext: str = "csv") -> Path:
-    """``OUT/traces/<condition>/<clip>.<model>.<ext>``."""
-    return Path(out) / "traces" / condition / f"{clip}.{model}.{ext}"
+    """``OUT/traces/<condition>/<clip>.<model>.<ext>``, checked to lie inside it (:func:`cdnf_ti.paths.inside`)."""
+    return inside(Path(out) / "traces" / condition, f"{clip}.{model}.{ext}")
 
 
 def fingerprint(path: str | os.PathLike, condition: str, model: str, seed: int, backend: str,
                 rain_params: dict | None, arch: str = "cpu", options: dict | None = None) -> dict:
-    """What a saved result depends on: the input file (path, size, mtime), the model, the code that
+    """What a saved result depends on: the input file (path, size, mtime and a digest of its first and
+    last MiB, :func:`cdnf_ti.provenance.input_identity`), the model, the code that
     ran it (:func:`cdnf_ti.provenance.code_identity`: a digest of the package's source files, the
     kernel compiler and its version, the arch and the engine settings) and, for rain, the seed and
     rain settings.
@@ -48,9 +51,7 @@ def fingerprint(path: str | os.PathLike, condition: str, model: str, seed: int, 
     ``--seed``, the rain settings, the backend, the compiler, the input or any source file of
     cdnf_ti recomputes it.
     """
-    st = os.stat(path)
-    fp: dict[str, Any] = {"source": str(path), "source_size": st.st_size, "source_mtime_ns": st.st_mtime_ns,
-                          "model": model, "condition": condition}
+    fp: dict[str, Any] = {**input_identity(path), "model": model, "condition": condition}
     if condition == "rain":
         fp.update(seed=seed, rain_params=rain_params or {})
     if options:  # how the input is read and the model set up, where not the defaults (--fps, --param, ...)

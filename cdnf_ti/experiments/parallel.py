@@ -13,6 +13,7 @@ import ctypes
 import multiprocessing as mp
 import os
 import signal
+import subprocess
 import sys
 import threading
 import time
@@ -23,6 +24,7 @@ from typing import Any, Callable, Iterator, Sequence
 
 from tqdm import tqdm
 
+from ..atomic import remove_stale_temps
 from ..errors import UserError
 from ..taichi_runtime import current_arch, ensure_taichi, limit_cpu_threads
 
@@ -273,8 +275,140 @@ def die_with_parent(parent_pid: int, poll_s: float = 1.0) -> None:
     threading.Thread(target=watch, name="cdnf_ti-parent-watchdog", daemon=True).start()
 
 
+#: Seconds a Ctrl-C or SIGTERM may wait for Python to take it before :func:`watch_interrupts` ends the process.
+INTERRUPT_GRACE_S = 1.5
+
+#: The watchdog process's code (:func:`watch_interrupts`); it runs with ``python -S`` and imports only built-ins.
+_WATCHDOG = r"""
+import os, select, signal, sys, time
+signal.signal(signal.SIGINT, signal.SIG_IGN)  # a terminal's Ctrl-C reaches the whole process group
+sig_fd, ack_fd, parent, grace = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4])
+while True:
+    got = os.read(sig_fd, 64)
+    if not got:
+        os._exit(0)  # the program has ended
+    if not set(got) & {signal.SIGINT, signal.SIGTERM}:
+        continue
+    deadline = time.monotonic() + grace
+    while time.monotonic() < deadline:
+        ready = select.select([ack_fd, sig_fd], [], [], max(0.0, deadline - time.monotonic()))[0]
+        if ack_fd in ready:
+            os.read(ack_fd, 64)
+            break
+        if sig_fd in ready and not os.read(sig_fd, 64):
+            os._exit(0)
+    else:
+        os.write(2, b"interrupted while native code (a kernel compile) holds the interpreter: exiting now; "
+                    b"finished results are saved, run the same command again to resume\n")
+        os.kill(parent, signal.SIGKILL)
+        os._exit(0)
+"""
+
+#: Write end of the pipe on which Python-level signal handlers tell the watchdog they ran (None: no watchdog).
+_ACK_FD: int | None = None
+#: The watchdog process (kept referenced: it runs as long as the program).
+_WATCHDOG_PROCESS: Any = None
+
+
+def acknowledge_signal() -> None:
+    """Tell the watchdog of :func:`watch_interrupts` that Python took the signal (every handler calls it first)."""
+    if _ACK_FD is not None:
+        with contextlib.suppress(OSError):
+            os.write(_ACK_FD, b"\x01")
+
+
+def watch_interrupts(grace_s: float = INTERRUPT_GRACE_S) -> bool:
+    """For command-line programs: a Ctrl-C or SIGTERM ends the process within ``grace_s`` s even while
+    native code holds the interpreter.
+
+    Python runs a signal handler only between two bytecodes, so during a kernel compile (native code,
+    interpreter held, up to minutes on a loaded machine) Ctrl-C did nothing. CPython's C-level handler
+    still writes the signal's number to the wake-up file (:func:`signal.set_wakeup_fd`) at once; here
+    that is a pipe read by a small watchdog process. Each Python-level handler first calls
+    :func:`acknowledge_signal`; a SIGINT or SIGTERM not acknowledged within ``grace_s`` seconds means the
+    interpreter is held, and the watchdog says so on stderr and kills the program (SIGKILL, exit status
+    137). Nothing finished is lost: every result is written atomically, and the temporary file and
+    output lock a killed run leaves are removed by the next run. The watchdog ends with the program.
+
+    Returns
+    -------
+    bool
+        Whether the watchdog runs: POSIX, the main thread, no wake-up file set by a host program.
+    """
+    global _ACK_FD, _WATCHDOG_PROCESS
+    if _ACK_FD is not None:
+        return True
+    if os.name != "posix" or threading.current_thread() is not threading.main_thread():
+        return False
+
+    sig_r, sig_w = os.pipe()
+    ack_r, ack_w = os.pipe()
+    os.set_blocking(sig_w, False)
+    host = signal.set_wakeup_fd(sig_w, warn_on_full_buffer=False)
+    try:
+        if host != -1:
+            raise OSError("a host program has its own wake-up file")
+        _WATCHDOG_PROCESS = subprocess.Popen(
+            [sys.executable, "-S", "-c", _WATCHDOG, str(sig_r), str(ack_r), str(os.getpid()), str(grace_s)],
+            pass_fds=(sig_r, ack_r), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+    except OSError:
+        signal.set_wakeup_fd(host)  # the host's own again (or none)
+        for fd in (sig_r, sig_w, ack_r, ack_w):
+            os.close(fd)
+        return False
+    os.close(sig_r)
+    os.close(ack_r)
+    _ACK_FD = ack_w
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _interrupt)
+    return True
+
+
+def _interrupt(signum, frame) -> None:
+    """Ctrl-C under :func:`watch_interrupts`: Python's own behaviour (KeyboardInterrupt), acknowledged."""
+    acknowledge_signal()
+    raise KeyboardInterrupt
+
+
+def _terminate(signum, frame) -> None:
+    """SIGTERM under :func:`handle_sigterm_as_interrupt`: the same as a first Ctrl-C (KeyboardInterrupt: the
+    run stops its workers, removes its temporary files and lock, and says so); a second SIGTERM or Ctrl-C
+    during that clean-up ends the process at once."""
+    acknowledge_signal()
+    signal.signal(signal.SIGTERM, _exit_now)
+    if _EXIT_ON_SECOND_INTERRUPT:
+        signal.signal(signal.SIGINT, _exit_now)
+    raise KeyboardInterrupt
+
+
+def handle_sigterm_as_interrupt() -> bool:
+    """For command-line programs: SIGTERM (``kill``, a job scheduler's stop) is handled like a first Ctrl-C
+    instead of ending the process on the spot, which left temporary files, the output lock and the worker
+    pool's semaphores behind. Returns whether it is installed (the main thread, SIGTERM not handled by a host)."""
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGTERM) not in (signal.SIG_DFL, _terminate):
+        return False
+    signal.signal(signal.SIGTERM, _terminate)
+    return True
+
+
+@contextlib.contextmanager
+def cleaned_up(out: str | os.PathLike) -> Iterator[None]:
+    """A batch run writing under ``out``: first remove the temporary files of writers that died (a run
+    killed mid-write), and on Ctrl-C or SIGTERM stop the workers at once and remove the temporary files
+    they leave (every finished result is kept: it was written atomically)."""
+    remove_stale_temps(out)
+    try:
+        yield
+    except KeyboardInterrupt:
+        stop_all_pools()
+        remove_stale_temps(out)
+        raise
+
+
 def _exit_now(signum, frame) -> None:
     """Second Ctrl-C during clean-up: end the process at once."""
+    acknowledge_signal()
     try:
         sys.stderr.write("interrupted again: exiting now\n")
         sys.stderr.flush()
@@ -284,6 +418,7 @@ def _exit_now(signum, frame) -> None:
 
 def _first_interrupt(signum, frame) -> None:
     """First Ctrl-C: arm :func:`_exit_now` for a second one, then stop the run (KeyboardInterrupt)."""
+    acknowledge_signal()
     signal.signal(signal.SIGINT, _exit_now)
     raise KeyboardInterrupt
 
@@ -307,7 +442,7 @@ def _interruptible() -> Iterator[None]:
     when Python's default Ctrl-C handling is in place (a host program's own handler is left alone)."""
     main = threading.current_thread() is threading.main_thread()
     old = signal.getsignal(signal.SIGINT) if main else None
-    if old is not signal.default_int_handler:
+    if old is not signal.default_int_handler and old is not _interrupt:
         yield
         return
     signal.signal(signal.SIGINT, _first_interrupt)

@@ -54,9 +54,10 @@ from .clip_tasks import (
     task_fingerprint as task_fingerprint,
 )
 from .clipscores import choose_level, correctness_matrix, cross_validated_accuracy, roc
-from .labels import drop_missing, labels_in_frames, read_labels, validate_dataset
+from .labels import load_labels
 from .layout import RAIN_CHOICES, trace_path
 from .nested import sweep_nested_cv
+from .parallel import cleaned_up
 from .scoring import Padding, score_clip
 from .sweep import (
     alert_levels as alert_levels,
@@ -225,11 +226,7 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
     if not folder.is_dir():
         raise InputError(folder, "dataset folder not found")
     labels_path = Path(labels_path) if labels_path is not None else folder / "labels.csv"
-    labels = read_labels(labels_path)
-    if skip_missing:
-        labels, _ = drop_missing(labels, folder)
-    files = validate_dataset(labels, folder, labels_path)
-    labels = labels_in_frames(labels, files, fps, (events or {}).get("bin_ms"), labels_path)
+    labels, files = load_labels(labels_path, folder, fps, (events or {}).get("bin_ms"), skip_missing)
     conditions = frames_only_conditions(files, RAIN_CHOICES[rain], folder)
     note_inferred_sensor_size(files, (events or {}).get("sensor_size"))
     out = Path(out)
@@ -241,8 +238,9 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
     tasks = [SweepTask(lab.clip, str(Path(files[lab.clip]).resolve()), name, tuple(s.items()), setting_key(s),
                        cond, str(out), seed, backend, arch, float(downscale), fps, color_order, **(events or {}))
              for s in settings for cond in conditions for lab in labels]
-    done = run_sweep(tasks, workers=workers, scheduler=scheduler, arch=arch,
-                     progress=f"sweep {name}" if progress else False)
+    with cleaned_up(out):  # stale temporary files removed; Ctrl-C and SIGTERM stop the workers cleanly
+        done = run_sweep(tasks, workers=workers, scheduler=scheduler, arch=arch,
+                         progress=f"sweep {name}" if progress else False)
     records = {(t.key, t.condition, t.clip): r for t, r in zip(tasks, done.records)}
     errors = [r for r in done.records if r.get("error")]
     ran, skipped = done.ran, done.reused

@@ -4,6 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Mapping, Sequence
 
+from ..paths import inside
 from .clipscores import IN_SAMPLE_NOTE
 from .htmlreport import Page, add_markdown
 
@@ -29,12 +30,13 @@ def write_dataset_html(run: "DatasetRun", summary: Mapping, markdown: str, pngs:
     named = [(figdir / "accuracy.png", "Accuracy per model and condition (paper Table II: diamonds)"),
              (figdir / "roc.png", "Clip-level ROC over the alert level (AUC in the legend)"),
              (figdir / "lead_times.png", "First alert time relative to contact on every collision clip"),
+             (figdir / "lead_time_seconds.png", "Lead time before the event (s) per model: the benchmark section"),
              (figdir / "threshold_sweep.png", "Threshold sweep (in-sample: scored on the same clips)")]
     present = [(p, c) for p, c in named if p.is_file()]
     if present:
         page.heading("Figures")
         page.images(present)
-    clips = [figdir / f"traces_{lab.clip}.png" for lab in run.labels]
+    clips = [inside(figdir, f"traces_{lab.clip}.png") for lab in run.labels]
     clips = [p for p in clips if p.is_file()]
     if clips:
         page.heading("Per-clip traces")

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
@@ -10,6 +11,7 @@ import numpy as np
 from ..atomic import atomic_write_json, atomic_write_text
 from ..models.base import Trace
 from ..paper import TABLE2
+from .benchmark_reports import benchmark_markdown, write_benchmark
 from .clipscores import (
     IN_SAMPLE_NOTE,
     bootstrap_accuracy,
@@ -43,15 +45,25 @@ SWEEP_COLUMNS = ("model", "condition", "parameter", "value", "is_default", "TP",
 
 
 def load_traces(run: "DatasetRun") -> dict:
-    """The saved traces of every successful row: (clip, model, condition) -> Trace."""
+    """The saved traces of every successful row: (clip, model, condition) -> Trace.
+
+    A trace that is missing, unreadable or holds no frame is left out (its figure panel says
+    "no trace"); the reports are written all the same.
+    """
     traces = {}
     for r in run.rows:
         if r.get("error"):
             continue
         p = trace_path(run.out, r["condition"], r["clip"], r["model"])
         thr = r.get("threshold")
-        traces[(r["clip"], r["model"], r["condition"])] = Trace.from_csv(
-            p, model=r["model"], threshold=None if thr in ("", None) else float(thr))
+        try:
+            tr = Trace.from_csv(p, model=r["model"], threshold=None if thr in ("", None) else float(thr))
+        except (OSError, ValueError, KeyError, IndexError) as e:
+            print(f"warning: {p}: cannot read the trace ({e}); left out of the figures and the threshold sweep"
+                  .splitlines()[0], file=sys.stderr)
+            continue
+        if tr.n_frames:
+            traces[(r["clip"], r["model"], r["condition"])] = tr
     return traces
 
 
@@ -215,9 +227,10 @@ def summary_markdown(run: "DatasetRun", summary: Mapping, specs: Mapping) -> str
             lt = d["mean_lead_time_ms"]
             L.append(f"| {m} | {c} | {d['TP']} | {d['TN']} | {d['FP']} | {d['FN']} "
                      f"({d['FN_early']}/{d['FN_late']}/{d['FN_none']}) | {d['errors']} | {pct(d['accuracy'])} | "
-                     f"{'' if lt is None else f'{lt:.0f} ms'} |")
+                     f"{'' if lt is None else f'{lt / 1000:.2f} s'} |")
     L += scores_markdown(run, summary)
     L += lead_time_markdown(run, summary)
+    L += benchmark_markdown(summary.get("benchmark") or {})
     L += ["", "## First alert per clip (frame, outcome; lead time before contact)", ""]
     cols = [(m, c) for m in run.models for c in run.conditions]
     L.append("| Clip | Label | Window (padded) | Contact | " + " | ".join(f"{m} {c}" for m, c in cols) + " |")
@@ -239,7 +252,7 @@ def summary_markdown(run: "DatasetRun", summary: Mapping, specs: Mapping) -> str
             txt = "none" if fa in (None, "") else str(fa)
             txt += f" {r['outcome']}" + (f" ({r['fn_reason']})" if r["fn_reason"] else "")
             if r.get("lead_time_ms") not in (None, ""):
-                txt += f", {float(r['lead_time_ms']):.0f} ms"
+                txt += f", {float(r['lead_time_ms']) / 1000:+.2f} s"
             cells.append(txt)
         L.append(f"| {lab.clip} | {lab.label} | {win} | {'' if lab.contact_frame is None else lab.contact_frame} | "
                  + " | ".join(cells) + " |")
@@ -252,11 +265,13 @@ def summary_markdown(run: "DatasetRun", summary: Mapping, specs: Mapping) -> str
               "`threshold_sweep.csv` has every count; `figures/threshold_sweep.png` plots them.", ""]
         for m in run.models:
             spec = specs[m]
-            how = {"model": f"the model's own `sweep_alerts` over `{spec.parameter}`",
-                   "cdnf-epsilon": "alert = I_v > 0.5 + epsilon on the saved I_v",
-                   "fallback": f"fallback: alert = {spec.parameter.split()[0]} > value on the saved output "
-                               "(the model defines no `sweep_alerts`)"}[spec.method]
-            L.append(f"### {m}: {spec.parameter} ({how})")
+            how = {"model": "The model's own alert rule, replayed on the saved traces at each value.",
+                   "cdnf-epsilon": "Alert when I_v > 0.5 + epsilon, on the saved I_v.",
+                   "fallback": f"Alert when {spec.parameter.split()[0]} > value, on the saved output (the model "
+                               "states no rule to replay)."}[spec.method]
+            L.append(f"### {m}: {spec.parameter}")
+            L.append("")
+            L.append(how)
             L.append("")
             L.append(f"| {spec.parameter} | " + " | ".join(f"{c} accuracy | {c} hits | {c} false alarms"
                                                          for c in run.conditions) + " |")
@@ -292,8 +307,8 @@ def scores_table(run: "DatasetRun", summary: Mapping) -> tuple[list[str], list[l
             lt = d["lead_times"]
             lead = f"{lt['hits_before_contact']}"
             if lt["hit_lead_median_ms"] is not None:
-                lead += (f", {lt['hit_lead_median_ms']:.0f} ms ({lt['hit_lead_min_ms']:.0f}-"
-                         f"{lt['hit_lead_max_ms']:.0f})")
+                lead += (f", {lt['hit_lead_median_ms'] / 1000:.2f} s ({lt['hit_lead_min_ms'] / 1000:.2f}-"
+                         f"{lt['hit_lead_max_ms'] / 1000:.2f})")
             held = d.get("held")
             best = d["in_sample_best"]
             rows.append([m, c, pct_ci(d["accuracy_ci"]), "n/a" if d["auc"] is None else f"{d['auc']:.3f}",
@@ -326,7 +341,7 @@ def scores_markdown(run: "DatasetRun", summary: Mapping) -> list[str]:
          f"- CV accuracy: {any_cv} cross-validation; each clip is scored at the alert level chosen on the other "
          "clips only (out-of-sample).",
          f"- Best level: {IN_SAMPLE_NOTE}.",
-         "- Lead time: ms before the contact frame of first alerts inside the window; hits at or after contact "
+         "- Lead time: seconds before the contact frame of first alerts inside the window; hits at or after contact "
          "warn of nothing and are counted separately.",
          f"- never alerts (baseline): a model that never alerts scores the share of non-collision clips, "
          f"{pct(summary.get('never_alerts_accuracy'))} here.",
@@ -372,8 +387,11 @@ def lead_time_markdown(run: "DatasetRun", summary: Mapping) -> list[str]:
 
 
 def write_reports(run: "DatasetRun", dataset: str, labels_path: str, seed: int, figures: bool = True,
-                  progress: bool = False) -> None:
-    """Write results.csv, threshold_sweep.csv, summary.md/json and (optionally) the figures."""
+                  progress: bool = False, fmt: str = "labels", annotations: Mapping | None = None) -> None:
+    """Write results.csv, threshold_sweep.csv, summary.md/json and (optionally) the figures.
+
+    ``fmt`` and ``annotations`` (clip -> :class:`~.annotations.Annotation`; None: the labels.csv rows) say
+    which benchmark's scores the summary's benchmark section gives (:mod:`.benchmark_reports`)."""
     out = Path(run.out)
     atomic_write_text(out / "results.csv", csv_text(run.rows, RESULT_COLUMNS))
     traces = load_traces(run)
@@ -381,10 +399,11 @@ def write_reports(run: "DatasetRun", dataset: str, labels_path: str, seed: int, 
     atomic_write_text(out / "threshold_sweep.csv", csv_text(run.sweep, SWEEP_COLUMNS))
     scores = honest_scores(run, traces, specs, seed=seed)
     run.summary = summary_dict(run, specs, dataset, labels_path, seed, scores)
+    run.summary["benchmark"], bench_pngs = write_benchmark(run, traces, fmt, annotations, seed, figures)
     atomic_write_json(out / "summary.json", run.summary)
     markdown = summary_markdown(run, run.summary, specs)
     atomic_write_text(out / "summary.md", markdown)
     pngs: list = []
     if figures:
-        pngs = dataset_figures(run, traces, specs, progress=progress)
+        pngs = dataset_figures(run, traces, specs, progress=progress) + bench_pngs
     write_dataset_html(run, run.summary, markdown, pngs)

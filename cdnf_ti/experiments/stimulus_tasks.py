@@ -28,6 +28,7 @@ from typing import Any, Sequence
 
 from ..models import create_model, get_model_class
 from ..models.base import NotConvergedWarning
+from ..paths import inside
 from ..stimuli.basic import BASIC_STIMULI, basic_stimulus
 from ..stimuli.grating import GratingStimulus
 from ..stimuli.incoherent import IncoherentStimulus, incoherent_stimulus
@@ -88,7 +89,7 @@ class StimulusTask:
         tag = self.stimulus if self.coherence is None else f"{self.stimulus}_c{round(self.coherence * 100):03d}"
         if self.coherence is not None and self.scatter != "flicker":
             tag += f"_{self.scatter}"
-        return Path(self.out) / "traces" / f"{tag}.{self.model}.csv"
+        return inside(Path(self.out) / "traces", f"{tag}.{self.model}.csv")
 
     def entry(self) -> Entry:
         """The task's cache entry: every field but the output folder, plus the code (:mod:`.tasks`)."""
@@ -249,11 +250,11 @@ class GridTask:
 
     @property
     def result_file(self) -> Path:
-        return Path(self.out) / "tasks" / f"{self.key}.json"
+        return inside(Path(self.out) / "tasks", f"{self.key}.json")
 
     @property
     def trace_file(self) -> Path:
-        return Path(self.out) / "traces" / f"{self.key}.csv"
+        return inside(Path(self.out) / "traces", f"{self.key}.csv")
 
     def entry(self) -> Entry:
         """The task's cache entry (:mod:`.tasks`): its specification plus the code that runs it."""

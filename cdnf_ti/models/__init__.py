@@ -1,27 +1,30 @@
 """The looming models: every model behind one interface, registered by name.
 
-Each model is one module with a :class:`Model` subclass decorated with
-:func:`register_model`; importing this package registers the built-in ones
-(``--models all`` runs them in the order imported here).
+Each model is one module of this package with a :class:`Model` subclass decorated with
+:func:`register_model`. Importing the package imports every such module (so a new model is a new
+file here, and nothing else changes) and exports each registered class and its parameters' class.
+``--models all`` runs them by their ``order`` (C-DNF first, then Table I's comparison models, then the
+later models by name).
 """
 from __future__ import annotations
 
+import importlib
+import pkgutil
+
 from .base import Model, ModelBackend, NotConvergedWarning, StepResult, Sweepable, Trace
-from .registry import MODELS, create_model, get_model_class, register_model
+from .registry import MODELS, create_model, get_model_class, register_model, sort_models
 
-# The built-in models, imported (so registered) in this order: C-DNF, Table I's comparison models, LGMD1,
-# F-LGMD ONn, then the later engine models.
-# isort: off
-from .cdnf import CDNF
-from .sdnf import SDNF, SDNFParams
-from .lgmd2 import LGMD2, LGMD2Params
-from .lgmd1 import LGMD1, LGMD1Params
-from .flgmd import FLGMDONn, FLGMDParams
-from .olgmd import OLGMD, OLGMDParams
-from .lplc2 import LPLC2, LPLC2Params
-# isort: on
+#: Modules of this package that hold no model.
+_NOT_MODELS = {"base", "registry"}
 
-__all__ = ["MODELS", "Model", "ModelBackend", "Sweepable", "StepResult", "Trace", "NotConvergedWarning", "CDNF",
-           "register_model", "get_model_class", "create_model",
-           "LGMD2", "LGMD2Params", "LGMD1", "LGMD1Params", "SDNF", "SDNFParams", "FLGMDONn", "FLGMDParams",
-           "OLGMD", "OLGMDParams", "LPLC2", "LPLC2Params"]
+for _info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
+    if _info.name not in _NOT_MODELS and not _info.name.startswith("_"):
+        importlib.import_module(f"{__name__}.{_info.name}")
+sort_models()
+
+#: Every built-in model class and its parameters' class, by class name (``from cdnf_ti.models import SDNF``).
+_EXPORTS = {c.__name__: c for m in MODELS.values() for c in (m, m.params_type) if c is not object}
+globals().update(_EXPORTS)
+
+__all__ = ["MODELS", "Model", "ModelBackend", "Sweepable", "StepResult", "Trace", "NotConvergedWarning",
+           "register_model", "get_model_class", "create_model", *sorted(_EXPORTS)]

@@ -14,11 +14,12 @@ import io
 import time
 import warnings
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Iterable, Protocol, Sequence, runtime_checkable
+from typing import Any, Callable, ClassVar, Iterable, Protocol, Sequence, runtime_checkable
 
 import numpy as np
 from tqdm import tqdm
 
+from ..alert_rule import AlertRule
 from ..atomic import atomic_write_text
 from ..errors import UserError
 from ..frames import to_grey
@@ -28,9 +29,6 @@ class NotConvergedWarning(RuntimeWarning):
     """A per-frame fixed point did not reach its tolerance within ``max_iter``."""
 
 
-#: Steps left out of a trace's time: the first allocates the model's state and compiles kernels,
-#: and a model that computes nothing on frame 0 (the LGMD family) compiles its layers on frame 1.
-WARMUP_STEPS = 2
 
 
 @dataclass
@@ -74,9 +72,14 @@ class Trace:
     output, spike, converged : ndarray, shape (T,)
     diagnostics : dict of str to ndarray, shape (T,)
     seconds : float
-        Wall time spent in the model's steps (s), excluding frame decoding and
-        the first :data:`WARMUP_STEPS` frames (they allocate the model's state and
-        compile its kernels: a model that computes nothing on frame 0 compiles on frame 1).
+        Wall time spent in the model's timed steps (s), excluding frame decoding: every step
+        but the set-up steps (:attr:`compile_seconds`).
+    compile_seconds : float
+        Wall time of the set-up steps (s): the first step, which builds the model's backend, and
+        every step during which a kernel compiled (or loaded from the compile cache), whenever it
+        happened (oLGMD compiles its layers on its first active frame, index 2).
+    timed_frames : int or None
+        Steps timed in :attr:`seconds` (None: not measured, e.g. a trace read from CSV).
     """
 
     model: str
@@ -87,6 +90,8 @@ class Trace:
     converged: np.ndarray
     diagnostics: dict[str, np.ndarray]
     seconds: float = 0.0
+    compile_seconds: float = 0.0
+    timed_frames: int | None = None
 
     @property
     def n_frames(self) -> int:
@@ -100,12 +105,13 @@ class Trace:
 
     @property
     def fps(self) -> float:
-        """Model throughput in frames per second (frames after the first :data:`WARMUP_STEPS` / ``seconds``)."""
-        timed = self.n_frames - WARMUP_STEPS
+        """Model throughput in frames per second: :attr:`timed_frames` / :attr:`seconds` (nan when none was timed)."""
+        timed = self.timed_frames or 0
         return timed / self.seconds if self.seconds > 0 and timed > 0 else float("nan")
 
     @classmethod
-    def from_steps(cls, model: "Model", steps: list[StepResult], seconds: float) -> "Trace":
+    def from_steps(cls, model: "Model", steps: list[StepResult], seconds: float, compile_seconds: float = 0.0,
+                   timed_frames: int | None = None) -> "Trace":
         keys: list[str] = []
         for s in steps:
             for k in s.diagnostics:
@@ -121,6 +127,8 @@ class Trace:
             converged=np.array([s.converged for s in steps], dtype=bool),
             diagnostics=diag,
             seconds=seconds,
+            compile_seconds=compile_seconds,
+            timed_frames=timed_frames,
         )
 
     def to_csv_text(self) -> str:
@@ -266,6 +274,8 @@ class Model:
     output_name: ClassVar[str] = "output"
     params_type: ClassVar[type] = object
     description: ClassVar[str] = ""
+    #: Where ``--models all`` runs the model: by ``order``, then by name (C-DNF 0, Table I's models 1-4).
+    order: ClassVar[int] = 100
     BACKENDS: ClassVar[tuple[str, ...]] = ("taichi", "numpy")
     #: The engine that compiles the kernels and builds a model's ``"taichi"`` backend
     #: (:class:`cdnf_ti.backends.Engine`: ``select_compiler(name)``, ``start(arch)``,
@@ -318,14 +328,31 @@ class Model:
         """Alert threshold on the continuous output, if the model has one."""
         return None
 
+    def alert_rule(self) -> AlertRule:
+        """The model's alert rule with its parameters: the trace column it compares, the level and the
+        rule in words (what ``run``'s line, summary.csv and ``live``'s ``start`` event report).
+
+        Default: ``output > threshold`` when the model has a :attr:`threshold`, else the spike itself.
+        A model whose alert compares something else (a count, a sum of frames) overrides it.
+        """
+        if self.threshold is not None:
+            thr = float(self.threshold)
+            return AlertRule(f"{self.output_name} > {thr:.4g}", self.output_name, self.output_name, thr, strict=True)
+        return AlertRule("spike", "spike", "spike", 1.0)
+
     # -- the per-frame skeleton ------------------------------------------------
     def step(self, frame: np.ndarray) -> StepResult:
         """Process one frame (2-D grey float in [0, 1] or uint8, or BGR uint8).
 
         The frame is converted to grey, checked against the model's frame size
         (fixed by the first frame), loaded into the backend, and handed to the
-        model's equations (:meth:`_step`).
+        model's equations (:meth:`_step`). Kernels compiled meanwhile are announced (:meth:`_compiling`).
         """
+        with self._compiling(np.shape(frame)):
+            return self._step_frame(frame)
+
+    def _step_frame(self, frame: np.ndarray) -> StepResult:
+        """:meth:`step` without the compile notice."""
         grey = self._prepare(frame)
         with self._backend_lock():
             t = self._t
@@ -354,6 +381,11 @@ class Model:
             raise ValueError(f"p_on and p_off must be (H, W) arrays of one shape, got {p_on.shape} and {p_off.shape}")
         if not self.takes_events:
             raise UserError(f"model {self.name} does not take event input yet")
+        with self._compiling(p_on.shape):
+            return self._step_bin(p_on, p_off)
+
+    def _step_bin(self, p_on: np.ndarray, p_off: np.ndarray) -> StepResult:
+        """:meth:`step_on_off` after its checks, without the compile notice."""
         if self._be is None:
             self._make_backend(p_on.shape, np.dtype(np.float32))
         elif p_on.shape != self._be.shape:
@@ -382,6 +414,14 @@ class Model:
             return {}
         with self._backend_lock():
             return {k: np.asarray(v) for k, v in self._be.fields().items()}
+
+    def _compiling(self, shape: Sequence[int]) -> Any:
+        """The context of a step at frames of ``shape`` (H, W, ...): the engine announces kernels compiled in it
+        ("compiling kernels for cdnf at 432x240, first time only; ..."); a no-op for the ``numpy`` backend."""
+        scope = getattr(self.engine, "compiling", None) if self.backend_name == "taichi" else None
+        if scope is None or len(shape) < 2:
+            return contextlib.nullcontext()
+        return scope(f"{self.name} at {shape[1]}x{shape[0]}")
 
     def _backend_lock(self) -> Any:
         """The lock of a backend whose buffers are shared with other models (else a no-op context)."""
@@ -416,6 +456,17 @@ class Model:
     def _taichi_backend(self, shape: tuple[int, int]) -> ModelBackend:
         """The compiled backend for frames of ``shape`` (H, W), from the engine (:attr:`engine`)."""
         return self._engine().backend(self, tuple(shape))
+
+    def compile_count(self) -> int:
+        """How many kernels the process has compiled (or loaded from the compile cache) so far: a step
+        during which it grows compiled (:func:`run_models` leaves it out of the trace's time).
+
+        The engine's count for the ``taichi`` backend; 0 for the ``numpy`` reference, which compiles nothing.
+        """
+        if self.backend_name != "taichi" or self.engine is None:
+            return 0
+        count = getattr(self.engine, "compile_count", None)
+        return int(count()) if count is not None else 0
 
     @classmethod
     def _engine(cls) -> Any:
@@ -468,7 +519,8 @@ class Model:
 
 
 def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bool | str = False,
-               total: int | None = None, errors: "list[BaseException | None] | None" = None) -> list[Trace]:
+               total: int | None = None, errors: "list[BaseException | None] | None" = None,
+               clock: Callable[[], float] = time.perf_counter) -> list[Trace]:
     """Reset several models and step them all through one pass over ``frames``.
 
     Each frame is decoded (and e.g. rain is generated) once and handed to every
@@ -488,6 +540,14 @@ def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bo
         ``reset``/``step`` is stored at its index in this list (filled with None
         first), that model stops and its trace is None; the others go on. An
         error of the frame stream itself (a corrupt file) still raises.
+    clock : callable
+        Seconds from an arbitrary origin (default :func:`time.perf_counter`).
+
+    Notes
+    -----
+    A model's set-up steps, its first (it builds the backend) and every step during which its
+    :meth:`Model.compile_count` grew, are timed apart (:attr:`Trace.compile_seconds`), so
+    :attr:`Trace.fps` is the speed of the steps that only compute, wherever the compiles fall.
 
     Returns
     -------
@@ -505,6 +565,8 @@ def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bo
             errors[k] = e
     steps: list[list[StepResult]] = [[] for _ in models]
     seconds = [0.0] * len(models)
+    setup_seconds = [0.0] * len(models)
+    timed = [0] * len(models)
     bar = None
     if progress:
         bar = tqdm(total=total, desc=progress if isinstance(progress, str) else models[0].name,
@@ -514,7 +576,8 @@ def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bo
             for k, m in enumerate(models):
                 if errors is not None and errors[k] is not None:
                     continue
-                t0 = time.perf_counter()
+                compiles = m.compile_count()
+                t0 = clock()
                 try:
                     steps[k].append(m.step_on_off(*frame) if isinstance(frame, tuple) else m.step(frame))
                 except Exception as e:
@@ -522,8 +585,12 @@ def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bo
                         raise
                     errors[k] = e
                     continue
-                if len(steps[k]) > WARMUP_STEPS:  # the first steps allocate state and compile kernels
-                    seconds[k] += time.perf_counter() - t0
+                took = clock() - t0
+                if len(steps[k]) == 1 or m.compile_count() != compiles:  # built the backend or compiled
+                    setup_seconds[k] += took
+                else:
+                    seconds[k] += took
+                    timed[k] += 1
             if bar is not None:
                 bar.update(1)
     finally:
@@ -534,7 +601,7 @@ def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bo
         if errors is not None and errors[k] is not None:
             traces.append(None)
             continue
-        trace = Trace.from_steps(m, steps[k], seconds[k])
+        trace = Trace.from_steps(m, steps[k], seconds[k], setup_seconds[k], timed[k])
         n_bad = int((~trace.converged).sum())
         if n_bad:
             warnings.warn(

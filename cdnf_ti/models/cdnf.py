@@ -55,6 +55,7 @@ class CDNF(Model):
     """
 
     name = "cdnf"
+    order = 0
     panels = (("u_on", "ON field u_on"), ("u_off", "OFF field u_off"), ("v", "Summation field v"))
     output_name = "I_v"
     params_type = CDNFParams

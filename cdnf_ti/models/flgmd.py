@@ -246,6 +246,7 @@ class FLGMDONn(LGMD1):
     """
 
     name = "flgmd_onn"
+    order = 4
     panels = (("ON", "ON"), ("OFF", "OFF"), ("S", "Summation S"))
     params_type = FLGMDParams
     description = ("F-LGMD ONn (after Chang et al. 2023): LGMD with instant negative ON feedback "

@@ -128,6 +128,7 @@ class LGMD1(LGMDFamily):
     """
 
     name = "lgmd1"
+    order = 3
     panels = (("ON", "ON"), ("OFF", "OFF"), ("S", "Summation S"))
     params_type = LGMD1Params
     description = "LGMD1 with ON/OFF pathways and SFA (Fu et al. 2018); equations from the authors' code"

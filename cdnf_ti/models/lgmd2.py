@@ -33,6 +33,7 @@ from typing import Any, ClassVar, Sequence
 
 import numpy as np
 
+from ..alert_rule import AlertRule
 from ..baselines_reference import NumpyLGMD2Backend
 from ..params import ModelParams, check_params, sigmoid
 from .base import Model, StepResult, Trace
@@ -196,6 +197,11 @@ class LGMDFamily(Model):
     def sweep_default(cls) -> float:
         return float(cls.params_type().n_ts)
 
+    def alert_rule(self) -> AlertRule:
+        """``spike count >= n_ts``: the ``count`` diagnostic against ``n_ts``."""
+        n_ts = int(self.params.n_ts)
+        return AlertRule(f"spike count >= {n_ts}", "spike count", "count", float(n_ts))
+
     @classmethod
     def sweep_alerts(cls, trace: Trace, values: Sequence[float]) -> list[np.ndarray]:
         """Alerts per frame at each count threshold, from the saved ``count`` diagnostic.
@@ -300,6 +306,7 @@ class LGMD2(LGMDFamily):
     """
 
     name = "lgmd2"
+    order = 2
     panels = (("ON", "ON"), ("OFF", "OFF"), ("S", "Summation S"))
     params_type = LGMD2Params
     description = "LGMD2 (Fu et al. 2020): biased ON/OFF, adaptive inhibition, SFA; equations from the authors' code"

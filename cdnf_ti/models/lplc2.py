@@ -24,6 +24,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ..alert_rule import AlertRule
 from ..lplc2_reference import NumpyLPLC2Backend
 from ..params import ModelParams, check_params
 from .base import Model, StepResult, Trace
@@ -111,7 +112,8 @@ class LPLC2(Model):
     spike in one of the frame's substeps). Diagnostics: ``spikes`` (in the frame), ``active`` (LPLC2
     units responding), ``current`` (GF input), ``core`` (the centre unit's response) and its four arms
     ``arm_left``, ``arm_right``, ``arm_up``, ``arm_down`` (the per-direction activity), ``dt`` (s, for
-    the threshold sweep's replay of the GF). :meth:`fields`:
+    the threshold sweep's replay of the GF), ``V_peak`` (the highest V of the frame's substeps, before a
+    spike's reset: how close the frame came to ``v_threshold``). :meth:`fields`:
     ``horizontal``, ``vertical`` (opponent motion), ``left``, ``right``, ``up``, ``down`` (thresholded
     arms), ``lplc2`` (responses), on the (H-1, W-1) unit grid padded to (H, W) with zeros.
     Frame 0 only stores the picture (membrane at rest). The model has no ``threshold`` on its output:
@@ -119,6 +121,7 @@ class LPLC2(Model):
     """
 
     name = "lplc2"
+    order = 6
     panels = (("horizontal", "EMD left - right"), ("vertical", "EMD up - down"), ("lplc2", "LPLC2 response"))
     output_name = "V"
     params_type = LPLC2Params
@@ -145,10 +148,16 @@ class LPLC2(Model):
             p = cls.params_type(v_threshold=float(value))
             v, alerts = p.v_rest, np.zeros(trace.n_frames, bool)
             for t in range(1, trace.n_frames):  # frame 0 only stores the picture
-                v, spikes = gf_frame(v, float(current[t]), float(dt[t]), p)
+                v, spikes, _ = gf_frame(v, float(current[t]), float(dt[t]), p)
                 alerts[t] = spikes > 0
             out.append(alerts)
         return out
+
+    def alert_rule(self) -> AlertRule:
+        """A giant-fibre spike: ``V > v_threshold`` in a substep, compared on ``V_peak`` (V before the reset)."""
+        thr = float(self.params.v_threshold)
+        return AlertRule(f"V > {thr:g} mV in a substep (a GF spike)", "V before reset", "V_peak",
+                         thr, strict=True)
 
     def _numpy_backend(self, shape: tuple[int, int]) -> NumpyLPLC2Backend:
         return NumpyLPLC2Backend(self.params, shape, self.fps)
@@ -159,12 +168,12 @@ class LPLC2(Model):
 
     def _step(self, t: int, grey: np.ndarray, loaded: None) -> StepResult:
         if t == 0:
-            return StepResult(t, self.v, False, True, self._diagnostics(0, 0, 0.0, 0.0, (0.0,) * 4))
+            return StepResult(t, self.v, False, True, self._diagnostics(0, 0, 0.0, 0.0, (0.0,) * 4, self.v))
         active, core, arms = self._be.pool()
         current = self._gf_input(active)
         self.active_prev = active
-        self.v, spikes = gf_frame(self.v, current, 1.0 / self.fps, self.params)
-        return StepResult(t, self.v, spikes > 0, True, self._diagnostics(spikes, active, current, core, arms))
+        self.v, spikes, v_peak = gf_frame(self.v, current, 1.0 / self.fps, self.params)
+        return StepResult(t, self.v, spikes > 0, True, self._diagnostics(spikes, active, current, core, arms, v_peak))
 
     def _gf_input(self, active: int) -> float:
         """``I = w n(t) v(t)``, ``v = (n(t) - n(t-1)) / normal_velocity``; 0 while ``n(t-1) = 0`` (or unknown)."""
@@ -173,23 +182,29 @@ class LPLC2(Model):
         n_prev = n if self.active_prev is None else self.active_prev / p.normal_count
         return 0.0 if n_prev == 0 else p.w * n * (n - n_prev) / p.normal_velocity
 
-    def _diagnostics(self, spikes: int, active: int, current: float, core: float, arms: tuple) -> dict[str, float]:
+    def _diagnostics(self, spikes: int, active: int, current: float, core: float, arms: tuple,
+                     v_peak: float) -> dict[str, float]:
         left, right, up, down = arms
         return dict(spikes=spikes, active=active, current=current, core=core, arm_left=left, arm_right=right,
-                    arm_up=up, arm_down=down, dt=1.0 / self.fps)
+                    arm_up=up, arm_down=down, dt=1.0 / self.fps, V_peak=v_peak)
 
 
-def gf_frame(v: float, current: float, dt: float, p: LPLC2Params) -> tuple[float, int]:
+def gf_frame(v: float, current: float, dt: float, p: LPLC2Params) -> tuple[float, int, float]:
     """One frame of the giant fibre from membrane ``v`` (mV) with input ``current`` over ``dt`` s:
-    ``substeps`` RK4 steps, a step ending above ``v_threshold`` spikes and resets. ``(V at the end, spikes)``."""
+    ``substeps`` RK4 steps, a step ending above ``v_threshold`` spikes and resets.
+
+    Returns ``(V at the end, spikes, V_peak)``, ``V_peak`` the highest V of the frame's substeps before
+    any reset (mV; above ``v_threshold`` exactly when the frame spiked)."""
     h = dt / p.substeps
     spikes = 0
+    v_peak = -np.inf
     for _ in range(p.substeps):
         v = lif_substep(v, current, h, p)
+        v_peak = max(v_peak, v)
         if v > p.v_threshold:
             spikes += 1
             v = p.v_reset
-    return v, spikes
+    return v, spikes, float(v_peak)
 
 
 def lif_substep(v: float, current: float, h: float, p: LPLC2Params) -> float:

@@ -31,6 +31,7 @@ import cv2
 import numpy as np
 
 from .. import olgmd_reference as ref
+from ..alert_rule import AlertRule
 from ..params import ModelParams, check_params
 from .base import Model, StepResult, Trace
 from .registry import register_model
@@ -109,6 +110,7 @@ class OLGMD(Model):
     """
 
     name = "olgmd"
+    order = 5
     output_name = "K"
     params_type = OLGMDParams
     description = ("oLGMD (Gao et al. 2024): LGMD2 with polarity-specific feed-forward inhibition; "
@@ -127,6 +129,12 @@ class OLGMD(Model):
     @classmethod
     def sweep_default(cls) -> float:
         return ref.N_SP
+
+    def alert_rule(self) -> AlertRule:
+        """The sum of ``S_spike = exp(a7 (K - t_spi))`` over the last 4 frames ``>= 3`` (``spike_sum``)."""
+        p = self.params
+        return AlertRule(f"{ref.N_TS}-frame sum of exp({p.a7:g}(K - {p.t_spi:g})) >= {ref.N_SP:g}",
+                         "spike_sum", "spike_sum", float(ref.N_SP))
 
     @classmethod
     def sweep_alerts(cls, trace: Trace, values: Sequence[float]) -> list[np.ndarray]:

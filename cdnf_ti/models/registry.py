@@ -2,7 +2,7 @@
 
 A model is registered by its class: a :class:`~cdnf_ti.models.base.Model` subclass decorated with
 :func:`register_model`, which names its kernel module (``kernels``) and its ``render`` panels
-(``panels``), imported by :mod:`cdnf_ti.models` (or by the program that defines it). Registered
+(``panels``); :mod:`cdnf_ti.models` imports every module of its package (a program may register its own). Registered
 models are what the command line's ``--models``, :func:`create_model`, ``render``, the bench and
 the tests' parametrisations take; ``cdnf_ti`` exports every built-in one.
 """
@@ -51,6 +51,13 @@ def register_model(cls: M) -> M:
             raise ValueError(f"model name {cls.name!r} of {cls.__qualname__} is taken by {other.__qualname__}")
     MODELS[cls.name] = cls
     return cls
+
+
+def sort_models() -> None:
+    """Order :data:`MODELS` by each class's ``order``, then by name (``--models all`` runs them so)."""
+    ranked = sorted(MODELS.items(), key=lambda item: (item[1].order, item[0]))
+    MODELS.clear()
+    MODELS.update(ranked)
 
 
 def get_model_class(name: str) -> type[Model]:

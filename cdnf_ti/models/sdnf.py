@@ -46,8 +46,9 @@ from typing import Sequence
 
 import numpy as np
 
+from ..alert_rule import AlertRule
 from ..baselines_reference import NumpySDNFBackend
-from ..params import CDNFParams, ModelParams, check_params, dog_radius, gaussian_profile, sigmoid, theta
+from ..params import THETA_SCALE, CDNFParams, ModelParams, check_params, dog_radius, gaussian_profile, sigmoid, theta
 from .base import Model, StepResult, Trace
 from .registry import register_model
 
@@ -175,6 +176,11 @@ class SDNF(Model):
     """
 
     name = "sdnf"
+    order = 1
+    kernels = "sdnf"
+    panels = (("E", "Binary input E"), ("u", "Field u"), ("activity", "Firing rate f(u)"))
+    #: Use the fast (lane) layout where it applies; ``False``: the pixel layout (same equations).
+    fast: bool = True
     output_name = "I"
     params_type = SDNFParams
     description = "SDNF (after Qin et al. 2024): single DNF, binary input, delayed adaptive DoG -- RECONSTRUCTION"
@@ -183,6 +189,15 @@ class SDNF(Model):
     def threshold(self) -> float:
         """Static part of the (dynamic) alert threshold, ``0.5 + epsilon``."""
         return self.params.threshold
+
+    def alert_rule(self) -> AlertRule:
+        """``I > max(0.5 + epsilon, I(t-1) + delta)`` on ``n_persist`` frames in a row: the ``run`` diagnostic
+        against ``n_persist``."""
+        p, name = self.params, self.output_name
+        prev = f"{name}(t-1)" + (f" + {p.delta:g}" if p.delta else "")
+        n = int(p.n_persist)
+        return AlertRule(f"{name} > max({p.threshold:.4g}, {prev}) on {n} frames in a row",
+                         "frames in a row above the dynamic threshold", "run", float(n))
 
     def _reset_state(self) -> None:
         self._prev = 0.5  # I(t-1)
@@ -222,10 +237,31 @@ class SDNF(Model):
     def _numpy_backend(self, shape: tuple[int, int]) -> NumpySDNFBackend:
         return NumpySDNFBackend(self.params, shape)
 
-    def _step(self, t: int, grey: np.ndarray | None, rho: float) -> StepResult:
+    def coefficients(self) -> dict:
+        """The stages' coefficients by name (``kernels/sdnf.py``): ``A``, ``h``, theta's scale, ``T_b``, the
+        rest ``-h`` and the DoG taps ``g1``, ``g2`` (float32)."""
         p = self.params
+        g1, g2 = p.dog_profiles()
+        taps = np.concatenate([g1.astype(np.float32), g2.astype(np.float32)])
+        return dict(A=p.A, h=p.h, theta=THETA_SCALE, t_b=p.t_b, u_rest=-p.h, taps=taps)
+
+    def kernel_options(self) -> dict:
+        """The DoG's radius (compile-time: the taps unroll)."""
+        return {"radius": int(self.params.radius)}
+
+    def _step(self, t: int, grey: np.ndarray | None, rho: float | None) -> StepResult:
+        p = self.params
+        be = self._be
+        n_cells = be.shape[0] * be.shape[1]
+        if rho is None:  # the engine: its input stage, on the frame or event bin that load kept
+            scale = 1.0 / 255.0 if grey is not None and grey.dtype == np.uint8 else 1.0
+            rho = be.launch("load", scale=scale, keep=0.0 if t == 0 else 1.0)[0] / n_cells
         b_t = p.B * (1.0 + p.kappa * rho)
-        act = self._be.update(b_t)
+        if hasattr(be, "launch"):
+            be.flip()  # f(u(t-1)) becomes the DoG's input
+            act = be.launch("update", B_t=b_t)[0] / n_cells
+        else:
+            act = be.update(b_t)
         out = sigmoid(act)
         dyn, self._run = dynamic_threshold(p, out, self._prev, self._run)
         above = self._run > 0
