@@ -624,13 +624,14 @@ def vector_kernel(kernel):
     return compiled_as(kernel, scalarize=False)
 
 
-def scalar_kernel(kernel):
+def scalar_kernel(kernel, fast_math: bool = True):
     """Compile the ``@ti.kernel`` ``kernel`` the usual way (``real_matrix_scalarize`` on), whatever
-    another thread's :func:`vector_kernel` is compiling at the same moment (:func:`compiled_as`)."""
-    return compiled_as(kernel, scalarize=True)
+    another thread's :func:`vector_kernel` is compiling at the same moment (:func:`compiled_as`);
+    ``fast_math=False``: without the runtime's fast-math (see :func:`compiled_as`)."""
+    return compiled_as(kernel, scalarize=True, fast_math=fast_math)
 
 
-def compiled_as(kernel, scalarize: bool):
+def compiled_as(kernel, scalarize: bool, fast_math: bool = True):
     """A launcher of ``kernel`` that compiles each new instance with ``real_matrix_scalarize = scalarize``.
 
     The first launch with a new compile signature (the values of its ``ti.template()``
@@ -645,6 +646,11 @@ def compiled_as(kernel, scalarize: bool):
     kernel : a ``@ti.kernel`` function of the running compiler (:func:`dsl`)
     scalarize : bool
         The option's value while the kernel compiles.
+    fast_math : bool
+        False: compile it with the compile configuration's ``fast_math`` off (also part of the cache's key).
+        Both compilers' fast-math lets LLVM reassociate and factor scalar float code (``a x + (1 - a) y``
+        becomes ``a (x - y) + y``) but leaves explicit vector code as written, so scalar code that must give
+        the bits of a vector kernel compiles without it.
 
     Returns
     -------
@@ -679,16 +685,18 @@ def compiled_as(kernel, scalarize: bool):
         _count_compile(module_name)
         with _compile_lock:
             cfg = ti.lang.impl.current_cfg()
-            before = cfg.real_matrix_scalarize
+            before = cfg.real_matrix_scalarize, cfg.fast_math
             cfg.real_matrix_scalarize = scalarize
+            cfg.fast_math = before[1] and fast_math
             try:
                 out = kernel(*args)
             finally:
-                cfg.real_matrix_scalarize = before
+                cfg.real_matrix_scalarize, cfg.fast_math = before
             compiled.add(sig)
         return out
 
     launch.kernel = kernel  # the kernel itself
     launch.scalarize = scalarize
+    launch.fast_math = fast_math
     launch.instances = lambda: len(compiled)  # compiled instances so far
     return launch

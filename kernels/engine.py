@@ -26,7 +26,7 @@ parallel loop per stage over the pixels of (planes, H, W) arrays (GPUs, narrow f
 import functools
 from types import SimpleNamespace
 
-from ..taichi_runtime import scalar_kernel, vector_kernel
+from ..taichi_runtime import current_arch, scalar_kernel, vector_kernel
 from . import common, compat, schedule
 from .common import BORDER_CODES, REFLECT, REPLICATE, ZERO, context
 from .schedule import Plan
@@ -316,8 +316,9 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
     @ti.func
     def _pixel_window3(x: ti.template(), k, i, j, mode: ti.template()):
+        """The sums of :func:`C.lane_edge_diag` as its vector code computes them (the edge sum pairwise)."""
         v = _pixel_at(x, k, i, j, mode, -1, 0) + _pixel_at(x, k, i, j, mode, 1, 0)
-        edge = v + _pixel_at(x, k, i, j, mode, 0, -1) + _pixel_at(x, k, i, j, mode, 0, 1)
+        edge = v + (_pixel_at(x, k, i, j, mode, 0, -1) + _pixel_at(x, k, i, j, mode, 0, 1))
         diag = (_pixel_at(x, k, i, j, mode, -1, -1) + _pixel_at(x, k, i, j, mode, 1, -1)) + (
             _pixel_at(x, k, i, j, mode, -1, 1) + _pixel_at(x, k, i, j, mode, 1, 1))
         return _pixel_at(x, k, i, j, mode, 0, 0), edge, diag
@@ -596,7 +597,8 @@ def build(ti, lanes: int) -> SimpleNamespace:
                 _pixel_stage(ti.static(Ctx(x, coef, fr, frame, c, nw, spec, rec)), s, step)
             _finish(spec, out)
 
-        return scalar_kernel(run_pixels)
+        # on the CPU without fast-math: the stages then compute as written, as the lane layout's vector code does
+        return scalar_kernel(run_pixels, fast_math=current_arch() != "cpu")
 
     return SimpleNamespace(ti=ti, kernel=kernel, Cell=Cell, res=res, LANES=LANES, REPLICATE=REPLICATE,
                            REFLECT=REFLECT, ZERO=ZERO)
