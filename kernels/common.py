@@ -17,7 +17,7 @@ BORDER_CODES = {"replicate": REPLICATE, "reflect": REFLECT, "zero": ZERO}
 # Taichi 1.7 hands each CPU thread chunks of the outer loop; a 240-row frame
 # would run on one thread if we looped over rows only. Loop over
 # (row, column-block) items instead; each item visits its columns in runs
-# (row_runs, below).
+# (frame_runs, below).
 COLUMN_BLOCKS = 4
 
 
@@ -282,7 +282,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
         """Row and column range [j0, j1) of work item ``k`` (row-major items)."""
         i = k // blocks
         b = k % blocks
-        bw = ((width + blocks - 1) // blocks + CHUNK - 1) // CHUNK * CHUNK  # whole runs (row_runs)
+        bw = ((width + blocks - 1) // blocks + CHUNK - 1) // CHUNK * CHUNK  # whole runs (frame_runs)
         j0 = ti.min(b * bw, width)
         j1 = ti.min(j0 + bw, width)
         return i, j0, j1
@@ -332,15 +332,6 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
 
     @ti.func
-    def run_sum(v, n: ti.template()):
-        """Sum of the n values of ``v``, accumulated in float64."""
-        s = ti.f64(0.0)
-        for c in ti.static(range(n)):
-            s += ti.cast(v[c], ti.f64)
-        return s
-
-
-    @ti.func
     def _combine(acc, r, reduce: ti.template()):
         """``acc + r`` (``reduce == "sum"``) or ``max(acc, r)``."""
         out = acc + r
@@ -350,43 +341,13 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
 
     @ti.func
-    def row_runs(body: ti.template(), ctx: ti.template(), i, j0, j1, H, W, reduce: ti.template(),
-                 halo: ti.template()):
-        """Call ``body(ctx, im, i, ip, jm, j, jp, n)`` over the columns ``[j0, j1)`` of row ``i``.
-
-        ``im``/``ip`` are the rows above and below, ``jm``/``jp`` the first columns of the
-        left and right neighbours of the run ``j .. j + n - 1`` (clamped: replicate border).
-        Runs of ``n = CHUNK`` (then ``QUARTER``) columns keep ``halo`` columns either side
-        inside the frame (``halo`` >= 1: the body's horizontal reach); every other column is
-        a run of one.
-        Returns the ``reduce`` (``"sum"``: float64 sum; ``"max"``) of body's returns.
-        """
-        im = ti.min(ti.max(i - 1, 0), H - 1)
-        ip = ti.min(ti.max(i + 1, 0), H - 1)
-        acc = ti.f64(0.0)
-        j = j0
-        while j < ti.min(j1, halo):  # runs of one column (neighbour columns clamped)
-            acc = _combine(acc, body(ctx, im, i, ip, ti.max(j - 1, 0), j, ti.min(j + 1, W - 1), 1), reduce)
-            j += 1
-        end = ti.min(j1, W - halo)
-        for n in ti.static((CHUNK, QUARTER)):
-            while j + n <= end:
-                acc = _combine(acc, body(ctx, im, i, ip, j - 1, j, j + 1, n), reduce)
-                j += n
-        while j < j1:
-            acc = _combine(acc, body(ctx, im, i, ip, ti.max(j - 1, 0), j, ti.min(j + 1, W - 1), 1), reduce)
-            j += 1
-        return acc
-
-
-    @ti.func
     def frame_runs(body: ti.template(), ctx: ti.template(), k, blocks, reduce: ti.template(), halo: ti.template()):
         """Work item ``k`` (a row's column block, :func:`block_span`) of a kernel's parallel loop over the
         frame of ``ctx.grid`` (:func:`context`): call ``body(ctx, i, j, n)`` on its columns in runs.
 
         Runs of ``n = CHUNK`` (then ``QUARTER``) columns ``j .. j + n - 1`` keep ``halo`` columns either
         side inside the frame (``halo`` >= 1: the body's horizontal reach); every other column is a
-        run of one (a body that reads neighbours maps them into the frame, :func:`run_neighbours`).
+        run of one (a body that reads neighbours maps them into the frame).
         Returns the ``reduce`` (``"sum"``: float64 sum, in column order; ``"max"``) of body's returns.
         """
         g = ti.static(ctx.grid)
@@ -407,13 +368,6 @@ def build(ti, lanes: int) -> SimpleNamespace:
             acc = _combine(acc, body(ctx, i, j, 1), reduce)
             j += 1
         return acc
-
-
-    @ti.func
-    def run_neighbours(i, j, H, W):
-        """``(im, ip, jm, jp)`` of the run at ``(i, j)`` of a :func:`frame_runs` body: the rows above and below
-        and the first columns of the left and right neighbour runs, mapped into the frame (replicate border)."""
-        return ti.min(ti.max(i - 1, 0), H - 1), ti.min(ti.max(i + 1, 0), H - 1), ti.max(j - 1, 0), ti.min(j + 1, W - 1)
 
 
     # -- separable DoG: the taps ``g1``, ``g2`` (2 R + 1 each) are in a coefficient array from slot
