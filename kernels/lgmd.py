@@ -11,7 +11,7 @@ Per frame:
 2. LGMD1 / LGMD2 ``layers``: the delayed 3x3 spreads or inhibitions and ``S`` (LGMD2: ``Ce``, result
    ``max_Ce``), then the grouping ``G`` (result ``sum_G``). F-LGMD ``solve``: the feedback updates (a solve
    launch, residuals of ON and OFF), then, when it converged, the layers at the fixed point (``finish``
-   computes them for a solve that did not).
+   computes them for a solve that did not); ``solve_on`` and ``finish_on`` where OFF is not iterated.
 
 Borders replicate, as in the authors' C# code. The NumPy float64 oracle of every stage is
 :mod:`cdnf_ti.baselines_reference`.
@@ -225,9 +225,9 @@ FLGMD_PLANES = Planes("L P ON OFF ON0 OFF0 Q_on Q_off X_on Y_on X_off Y_off S_on
 #: the iterate's start ``(w, kappa)`` of ON and OFF; the stencils ``W_x`` (centre, edge, diagonal) of ON and
 #: OFF; the feedback gains ``beta`` (ON, OFF); the summation threshold ``t_s``.
 FLGMD_COEFS = Coefs(clip=1, dc=1, q_on=2, q_off=2, start_on=2, start_off=2, w_on=3, w_off=3, beta=2, t_s=1)
-#: The load's ``scale``, ``keep``; the solve's updates at most, tolerance and growth limit; whether OFF is
-#: iterated (1) or equals its drive (0); the updates of this frame run before this launch.
-FLGMD_SCALARS = Scalars("scale keep updates tol grow with_off ran")
+#: The load's ``scale``, ``keep``; the solve's updates at most, tolerance and growth limit; the updates of this
+#: frame run before this launch.
+FLGMD_SCALARS = Scalars("scale keep updates tol grow ran")
 
 
 @functools.lru_cache(maxsize=None)
@@ -302,20 +302,6 @@ def flgmd(ti, lanes: int) -> SimpleNamespace:
     relax_on, relax_on_back = relax_of("ON", pl.X_on, pl.Y_on), relax_of("ON", pl.Y_on, pl.X_on)
     relax_off, relax_off_back = relax_of("OFF", pl.X_off, pl.Y_off), relax_of("OFF", pl.Y_off, pl.X_off)
 
-    @ti.func
-    def update(a: ti.template()):
-        """Update ``ran + step`` of ON (and OFF where iterated); returns their residuals."""
-        r_on, r_off = a.zeros(), a.zeros()
-        if (a.step + ti.cast(a.value(v.ran), ti.i32)) % 2 == 0:
-            r_on = relax_on(a)
-            if a.value(v.with_off) > 0.0:
-                r_off = relax_off(a)
-        else:
-            r_on = relax_on_back(a)
-            if a.value(v.with_off) > 0.0:
-                r_off = relax_off_back(a)
-        return r_on, r_off
-
     def settle_of(x):
         """The channel's fixed point in the iterate ``x``, kept as its settled value; a ti.func of ``a`` returning
         its ``S_X``."""
@@ -333,32 +319,55 @@ def flgmd(ti, lanes: int) -> SimpleNamespace:
     settle_off, settle_off_back = settle_of(pl.X_off), settle_of(pl.Y_off)
 
     @ti.func
-    def layers(a: ti.template()):
-        """``S_on``, ``S_off`` and ``S = S_on + S_off`` (kept where ``>= t_s``) at the fixed point."""
-        odd = (a.step + ti.cast(a.value(v.ran), ti.i32)) % 2
-        s_on, s_off = a.zeros(), a.zeros()
-        if odd == 0:
-            s_on = settle_on(a)
-        else:
-            s_on = settle_on_back(a)
-        if (odd == 0) | (a.value(v.with_off) == 0.0):
-            s_off = settle_off(a)
-        else:
-            s_off = settle_off_back(a)
-        a.put(pl.S_on, s_on)
-        a.put(pl.S_off, s_off)
-        s = s_on + s_off
-        a.put(pl.S, ti.select(s >= a.coef(k.t_s), s, 0.0))
-
-    @ti.func
     def grouping(a: ti.template()):
         """``G = S (*) ones/9``; returns it (summed)."""
         g = mean9(a)
         a.put(pl.G, g)
         return g
 
-    after = (Stage(layers, ghosts=(pl.S, pl.ON, pl.OFF)), Stage(grouping, sums="sum_G"))
-    update = Stage(update, residuals=2, ghosts=(pl.X_on, pl.Y_on, pl.X_off, pl.Y_off))
-    solve = Launch("solve", *after, update=(update,), scalars=v)
-    return engine.model(pl, k, v, F.E, Launch("load", Stage(load, sums="sum_p", ghosts=(pl.X_on, pl.X_off))), solve,
-                        Launch("finish", *after))
+    def launches_of(with_off: bool, suffix: str) -> tuple[Launch, Launch]:
+        """The solve launch and the finish launch (named with ``suffix``) iterating ON, and OFF where ``with_off``
+        (else OFF is its drive: no update of its own, no ghost columns to refresh)."""
+
+        @ti.func
+        def update(a: ti.template()):
+            """Update ``ran + step`` of ON (and OFF where iterated); returns their residuals."""
+            r_on, r_off = a.zeros(), a.zeros()
+            if (a.step + ti.cast(a.value(v.ran), ti.i32)) % 2 == 0:
+                r_on = relax_on(a)
+                if ti.static(with_off):
+                    r_off = relax_off(a)
+            else:
+                r_on = relax_on_back(a)
+                if ti.static(with_off):
+                    r_off = relax_off_back(a)
+            return r_on, r_off
+
+        @ti.func
+        def layers(a: ti.template()):
+            """``S_on``, ``S_off`` and ``S = S_on + S_off`` (kept where ``>= t_s``) at the fixed point."""
+            odd = (a.step + ti.cast(a.value(v.ran), ti.i32)) % 2
+            s_on, s_off = a.zeros(), a.zeros()
+            if odd == 0:
+                s_on = settle_on(a)
+            else:
+                s_on = settle_on_back(a)
+            if ti.static(with_off):
+                if odd == 0:
+                    s_off = settle_off(a)
+                else:
+                    s_off = settle_off_back(a)
+            else:
+                s_off = settle_off(a)
+            a.put(pl.S_on, s_on)
+            a.put(pl.S_off, s_off)
+            s = s_on + s_off
+            a.put(pl.S, ti.select(s >= a.coef(k.t_s), s, 0.0))
+
+        after = (Stage(layers, ghosts=(pl.S, pl.ON, pl.OFF)), Stage(grouping, sums="sum_G"))
+        iterates = (pl.X_on, pl.Y_on, pl.X_off, pl.Y_off) if with_off else (pl.X_on, pl.Y_on)
+        step = Stage(update, residuals=2, ghosts=iterates)
+        return Launch("solve" + suffix, *after, update=(step,), scalars=v), Launch("finish" + suffix, *after)
+
+    load_launch = Launch("load", Stage(load, sums="sum_p", ghosts=(pl.X_on, pl.X_off)))
+    return engine.model(pl, k, v, F.E, load_launch, *launches_of(True, ""), *launches_of(False, "_on"))

@@ -283,6 +283,7 @@ class FLGMDONn(LGMD1):
         super()._setup()
         p = self.params
         self._bounds = p.chebyshev_bounds(self.dt) if p.scheme == "chebyshev" else None
+        self._launch = "" if p.beta_off != 0.0 else "_on"  # the solve's launches: OFF iterated or not
 
     def _run_layers(self) -> tuple[float, dict[str, float], bool]:
         p = self.params
@@ -299,7 +300,7 @@ class FLGMDONn(LGMD1):
         if self.backend_name == "numpy":
             sum_g = be.finish()
         else:  # a solve launch that converged computed the layers; else the finish launch does
-            sum_g = self._sum_g if self._sum_g is not None else be.launch("finish", ran=self._ran)[0]
+            sum_g = self._sum_g if self._sum_g is not None else be.launch("finish" + self._launch, ran=self._ran)[0]
         extra = dict(iterations=max(rep.iterations), residual_on=rep.residuals[0], residual_off=rep.residuals[1])
         return sum_g, extra, rep.converged
 
@@ -312,8 +313,8 @@ class FLGMDONn(LGMD1):
         residuals are both ``<= tol``; that launch also computes the layers at the fixed point (``_sum_g``)."""
         p = self.params
         tol = float(np.float32(p.tol))  # the kernels' float32 tolerance
-        res, (sum_g,) = self._be.solve("solve", coefs, len(coefs), tol, RESTART_GROWTH,
-                                        with_off=float(p.beta_off != 0.0), ran=float(self._ran))
+        res, (sum_g,) = self._be.solve("solve" + self._launch, coefs, len(coefs), tol, RESTART_GROWTH,
+                                        ran=float(self._ran))
         self._ran += len(res)
         self._sum_g = sum_g if res and max(res[-1]) <= tol else None
         return res
