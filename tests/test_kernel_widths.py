@@ -39,7 +39,8 @@ def test_every_context_has_at_most_eight_members():
             name, fields = (a.value for a in node.args[:2])
             contexts[name] = fields.split()
     wide = {k: len(v) for k, v in contexts.items() if len(v) > MAX_CONTEXT_MEMBERS}
-    assert len(contexts) >= 10 and not wide, wide
+    # the contexts left are those of the kernels not on the engine (C-DNF's, the shared DoG's); engine stages have none
+    assert contexts and not wide, wide
 
 
 @pytest.mark.parametrize("module", MODULES)
