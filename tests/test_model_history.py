@@ -2,7 +2,8 @@
 
 Each model added on the one-model contract (the engine, one backend, registration by class) came in one
 commit, ``Model <name>: ...``, that adds its kernel module and its model module together and touches only
-that model's own files (its kernels, model, float64 reference, tests, oracle script) and the docs: no
+that model's own files (its kernels, model, float64 reference, tests, oracle script) and the docs (its row in the README's
+table of models among them): no
 engine, backend, registry or render file and no list of models elsewhere. The tests skip, saying why,
 outside a git checkout with its history (a source archive, a shallow clone) or before the model exists.
 """
@@ -22,7 +23,8 @@ ADDED_MODELS = ("lgmd_p_on_off", "dlgmd", "event_looming")
 
 #: The files a model's commit may touch, ``{name}`` its registry name.
 OWN_FILES = ("kernels/{name}.py", "cdnf_ti/models/{name}.py", "cdnf_ti/{name}_reference.py", "tests/test_{name}.py",
-             "tests/test_{name}_*.py", "tests/data/{name}/*", "docs/*.md", "docs/figures/*{name}*", "CHANGELOG.md")
+             "tests/test_{name}_*.py", "tests/data/{name}/*", "docs/*.md", "docs/figures/*{name}*", "README.md",
+             "CHANGELOG.md")
 
 
 def _git(*args: str) -> str:
