@@ -2,9 +2,9 @@
 
 Each model added on the one-model contract (the engine, one backend, registration by class) came in one
 commit, ``Model <name>: ...``, that adds its kernel module and its model module together and touches only
-that model's own files (its kernels, model, float64 reference, tests, oracle script) and the docs (its row in the README's
-table of models among them): no
-engine, backend, registry or render file and no list of models elsewhere. The tests skip, saying why,
+that model's own files (its kernels, model, float64 reference, tests, oracle script) and the docs (its
+row in the README's table of models among them): no engine, backend, registry or render file and no list
+of models elsewhere. The tests skip, saying why,
 outside a git checkout with its history (a source archive, a shallow clone) or before the model exists.
 """
 from __future__ import annotations
