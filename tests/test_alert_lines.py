@@ -15,8 +15,8 @@ from cdnf_ti.models.lplc2 import gf_frame
 from cdnf_ti.run import main
 from cdnf_ti.stimuli.basic import basic_stimulus
 
-#: Each model's alert rule as its paper or code states it (docs/MODELS.md), with default parameters,
-#: and the trace column the rule compares.
+#: The rule of each model that its paper or code states (docs/MODELS.md), with default parameters, and the
+#: trace column it compares. A model added later states its own in its tests; every registered model runs below.
 RULES = {
     "cdnf": ("I_v > 0.506", "I_v"),
     "sdnf": ("I > max(0.506, I(t-1)) on 3 frames in a row", "run"),
@@ -28,8 +28,19 @@ RULES = {
 }
 
 
-def test_every_registered_model_states_its_rule():
-    assert set(RULES) == set(MODELS)
+@pytest.mark.parametrize("name", list(RULES))
+def test_the_published_models_state_their_published_rule(name):
+    rule = create_model(name, backend="numpy").alert_rule()
+    assert (rule.rule, rule.column) == RULES[name]
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_every_registered_model_states_a_rule_on_a_column_of_its_trace(name):
+    model = create_model(name, backend="numpy")
+    rule = model.alert_rule()
+    trace = model.run(np.zeros((3, 24, 24), np.uint8))
+    assert rule.rule and rule.quantity and np.isfinite(rule.level)
+    assert rule.column in {"spike", model.output_name, *trace.diagnostics}
 
 
 @pytest.fixture(scope="module")
@@ -44,16 +55,16 @@ def _number(text: str) -> float:
     return float("nan") if text == "n/a" else float(text)
 
 
-@pytest.mark.parametrize("name", list(RULES))
+@pytest.mark.parametrize("name", list(MODELS))
 def test_run_line_and_summary_give_the_models_rule_peak_and_level(name, looming_npy, tmp_path, capsys):
-    rule_text, column = RULES[name]
+    rule = create_model(name, backend="numpy").alert_rule()
+    rule_text, column = rule.rule, rule.column
     out = tmp_path / "o"
     assert main([str(looming_npy), "--model", name, "--backend", "numpy", "--out", str(out), "--no-progress"]) == 0
     line = capsys.readouterr().out.strip()
     row = next(csv.DictReader(open(out / "summary.csv")))
     trace = list(csv.DictReader(open(out / row["trace"])))
     peak = max(float(r[column]) for r in trace)
-    rule = create_model(name, backend="numpy").alert_rule()
     assert f"alert when {rule_text}" in line and row["alert_rule"] == rule_text
     shown = line.split(f"max {rule.quantity} ", 1)[1].split(",", 1)[0]
     assert _number(shown) == pytest.approx(peak, abs=5e-5)

@@ -97,3 +97,17 @@ def test_emulator_params_refuse_bad_values():
     for bad in ({"threshold_on": 0.0}, {"refractory_ms": -1.0}, {"log_eps": float("nan")}):
         with pytest.raises(ValueError):
             EmulatorParams(**bad)
+
+
+def test_a_crossing_owed_on_a_flat_interval_fires_at_its_start():
+    # the level sits exactly one threshold above the reference but did not move in this interval (d = 0):
+    # the ON event is owed from before (e.g. a refractory period), and fires at the interval's start
+    from cdnf_ti.events.emulator import _crossings
+
+    level, ref = np.full((1, 1), 0.5), np.full((1, 1), 0.0)
+    last = np.full((1, 1), -1e9)
+    with np.errstate(all="raise"):  # no 0/0 on the way
+        ev = _crossings(level.copy(), level.copy(), ref, np.full((1, 1), 0.5), np.full((1, 1), 0.5), 1000.0, 2000.0,
+                        last, 0.0)
+    assert ev.size == 1 and ev["t"][0] == 1000 and ev["p"][0] == 1
+    assert ref[0, 0] == 0.5

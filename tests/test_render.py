@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from cdnf_ti.experiments.synthetic import make_synthetic_dataset
+from cdnf_ti.models import MODELS
 from cdnf_ti.video import write_video
 
 
@@ -92,8 +93,8 @@ def test_dataset_render_makes_a_movie_per_clip(tmp_path):
         assert n == len(frames) == 46
 
 
-@pytest.mark.parametrize("model", ["lgmd2", "sdnf"])
-def test_other_models_render_too(tmp_path, model):
+@pytest.mark.parametrize("model", [name for name in MODELS if name != "cdnf"])
+def test_every_other_registered_model_renders_too(tmp_path, model):
     from cdnf_ti.render import render_video
 
     n = render_video("stim:dark_looming?size=32", model, tmp_path / "m.mp4", backend="numpy")

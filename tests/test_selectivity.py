@@ -101,3 +101,10 @@ def test_printed_table_gives_the_papers_value_next_to_each_alert():
     for stim, line in zip(BASIC_STIMULI, text.splitlines()[2:]):
         cell = line.strip("|").split("|")[1].strip()
         assert cell.startswith(f"0 ({TABLE1['sdnf'][stim]})")
+
+
+def test_a_model_outside_the_papers_table_gets_no_paper_column_or_value():
+    text = format_table1(_result({"olgmd": {s: 1 for s in BASIC_STIMULI}}))
+    lines = text.splitlines()
+    assert "paper" not in lines[0] and "olgmd" in lines[0]
+    assert all(line.strip("|").split("|")[1].strip() == "1" for line in lines[2:])

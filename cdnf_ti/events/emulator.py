@@ -136,7 +136,9 @@ def _crossings(l_prev, l_new, ref, c_on, c_off, t_a, t_b, last, refractory_us) -
         lst = last[ys, xs]
         for j in range(1, int(nn.max()) + 1):
             sel = nn >= j
-            frac = np.clip((r0[sel] + j * step[sel] - a[sel]) / d[sel], 0.0, 1.0)
+            # where the path is flat (d = 0) the crossing is owed from before the interval: at its start
+            frac = np.clip(np.divide(r0[sel] + j * step[sel] - a[sel], d[sel], out=np.zeros(int(sel.sum())),
+                                     where=d[sel] != 0.0), 0.0, 1.0)
             t = np.minimum(np.floor(t_a + frac * (t_b - t_a)), max(t_b - 1, t_a))
             ok = t - lst[sel] >= refractory_us
             idx = np.flatnonzero(sel)[ok]

@@ -46,9 +46,9 @@ def _snapshots(name: str, size: int, coherence: float | None, seed: int, k: Sequ
 
 
 def format_table1(result: dict[str, dict[str, dict]]) -> str:
-    """Markdown table: each model's alert (paper's value in brackets)."""
+    """Markdown table: each model's alert (the paper's value in brackets, for the models in its Table I)."""
     models = list(result)
-    head = "| Stimulus | " + " | ".join(f"{m} (paper)" for m in models) + " |"
+    head = "| Stimulus | " + " | ".join(f"{m} (paper)" if m in TABLE1 else m for m in models) + " |"
     sep = "|---|" + "---|" * len(models)
     lines = [head, sep]
     for stim in BASIC_STIMULI:
