@@ -324,6 +324,20 @@ def build(ti, lanes: int) -> SimpleNamespace:
         return C.lane_edge_diag(x, k, im, i, ip, e)
 
     @ti.func
+    def _lane_smooth3(x: ti.template(), k, i, e, mode: ti.template(), k0, k1):
+        """``W (*) x`` for ``W = k k^T``, ``k = (k1, k0, k1)``: vertical sums ``c = k0 u[i] + k1 (u[i-1] + u[i+1])``
+        of the element and its neighbours' adjacent lanes, then ``k0 c + k1 (c[j-1] + c[j+1])``."""
+        H = x.shape[1]
+        im, ip = C.border_index(i - 1, H, mode), C.border_index(i + 1, H, mode)
+        wim, wip = ti.f32(C.border_weight(i - 1, H, mode)), ti.f32(C.border_weight(i + 1, H, mode))
+        c_left = k0 * x[k, i, e - 1][LANES - 1] + k1 * (wim * x[k, im, e - 1][LANES - 1]
+                                                        + wip * x[k, ip, e - 1][LANES - 1])
+        c_cur = k0 * x[k, i, e] + k1 * (wim * x[k, im, e] + wip * x[k, ip, e])
+        c_right = k0 * x[k, i, e + 1][0] + k1 * (wim * x[k, im, e + 1][0] + wip * x[k, ip, e + 1][0])
+        left, right = C.lane_neighbours(c_left, c_cur, c_right)
+        return k0 * c_cur + k1 * (left + right)
+
+    @ti.func
     def _lane_put(x: ti.template(), k, i, e, v, ring: ti.template(), W: ti.template()):
         if ti.static(ring):
             v = v * _lane_inside(i, e, x.shape[1], W)
@@ -392,6 +406,18 @@ def build(ti, lanes: int) -> SimpleNamespace:
         return _pixel_at(x, k, i, j, mode, 0, 0), edge, diag
 
     @ti.func
+    def _pixel_smooth3(x: ti.template(), k, i, j, mode: ti.template(), w0, w1, w2):
+        """``W (*) x`` for a symmetric 3x3 ``W``: centre weight ``w0``, edge ``w1``, diagonal ``w2``."""
+        H, W = x.shape[1], x.shape[2]
+        im, ip = C.border_index(i - 1, H, mode), C.border_index(i + 1, H, mode)
+        jm, jp = C.border_index(j - 1, W, mode), C.border_index(j + 1, W, mode)
+        wim, wip = C.border_weight(i - 1, H, mode), C.border_weight(i + 1, H, mode)
+        wjm, wjp = C.border_weight(j - 1, W, mode), C.border_weight(j + 1, W, mode)
+        edge = wim * x[k, im, j] + wip * x[k, ip, j] + wjm * x[k, i, jm] + wjp * x[k, i, jp]
+        diag = wim * (wjm * x[k, im, jm] + wjp * x[k, im, jp]) + wip * (wjm * x[k, ip, jm] + wjp * x[k, ip, jp])
+        return w0 * x[k, i, j] + w1 * edge + w2 * diag
+
+    @ti.func
     def _pixel_put(x: ti.template(), k, i, j, v, ring: ti.template()):
         if ti.static(ring):
             H, W = x.shape[1], x.shape[2]
@@ -453,6 +479,44 @@ def build(ti, lanes: int) -> SimpleNamespace:
             """``(centre, edge sum, diagonal sum)`` of the 3x3 window of ``plane``."""
             mode = self.spec.border(plane)[0]
             return (_lane_window3 if self.lane else _pixel_window3)(self.x, self._k(plane), self.i, self.j, mode)
+
+        @_dsl
+        def smooth3(self, plane, k, w):
+            """``W (*) plane`` for a symmetric separable 3x3 ``W = k k^T`` (``k``: a coefficient ``(k0, k1)``,
+            ``k = (k1, k0, k1)``; ``w``: W's centre, edge and diagonal weights): summed separably on the lane
+            layout, by weights on the pixel layout (two roundings of the same sum)."""
+            mode = self.spec.border(plane)[0]
+            if self.lane:
+                return _lane_smooth3(self.x, self._k(plane), self.i, self.j, mode, self.coef(k, 0), self.coef(k, 1))
+            return _pixel_smooth3(self.x, self._k(plane), self.i, self.j, mode, self.coef(w, 0), self.coef(w, 1),
+                                  self.coef(w, 2))
+
+        @_dsl
+        def taps(self, plane, name: str, vertical: bool = False):
+            """``sum_d g[d] plane(offset d)``, ``d = -R .. R`` along the columns (rows if ``vertical``), for the
+            symmetric taps ``g`` (``2 R + 1`` floats), the compile-time option ``name`` (constants in the code):
+            the lane layout adds the centre, then the pairs ``g[d] (x[-d] + x[d])``; the pixel layout adds the
+            taps in order from ``-R``."""
+            g = self.spec.options[name]
+            R = len(g) // 2
+
+            def at(d):
+                return self.at(plane, d, 0) if vertical else self.at(plane, 0, d)
+
+            if self.lane:
+                acc = g[R] * at(0)
+                for d in range(1, R + 1):
+                    acc = acc + g[R + d] * (at(-d) + at(d))
+                return acc
+            acc = self.zeros()
+            for d in range(-R, R + 1):
+                acc = acc + g[R + d] * at(d)
+            return acc
+
+        @_dsl
+        def frame_mask(self):
+            """1.0 on the cell's frame columns, 0.0 on a lane past the frame's last column."""
+            return C.lane_mask(self.j, self.spec.W) if self.lane else 1.0
 
         @_dsl
         def put(self, plane, value):
