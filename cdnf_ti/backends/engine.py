@@ -40,7 +40,7 @@ class Backend:
         ti = dsl()
         self.M = kernels(model.kernels)
         self.shape = H, W = tuple(int(s) for s in shape)
-        self.lane = getattr(model, "fast", True) and arch == "cpu" and W >= 2 * lanes()
+        self.lane = self.lane_layout(getattr(model, "fast", True), self.shape, arch)
         self.modes = engine.borders(self.M.planes, model.borders() if hasattr(model, "borders") else {})
         self.options = tuple(sorted(model.kernel_options().items())) if hasattr(model, "kernel_options") else ()
         n = self.M.planes.count
@@ -61,6 +61,12 @@ class Backend:
         self.lock = Scratch.get().lock  # the engine's scratch is one per process (Model.step holds it)
         self.frame: np.ndarray = np.zeros((H, W), np.float32)
         self.reset()
+
+    @staticmethod
+    def lane_layout(fast: bool, shape: tuple[int, int], arch: str) -> bool:
+        """Whether frames of ``shape`` (H, W) run on the lane layout: ``fast``, the CPU (the persistent workers
+        wait for each other on CPU threads) and at least two lane vectors wide."""
+        return bool(fast) and arch == "cpu" and shape[1] >= 2 * lanes()
 
     def reset(self) -> None:
         """Every plane to 0, or to its declared initial value; the pairs' parity to 0; every span pending."""
