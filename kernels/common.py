@@ -17,7 +17,7 @@ BORDER_CODES = {"replicate": REPLICATE, "reflect": REFLECT, "zero": ZERO}
 # Taichi 1.7 hands each CPU thread chunks of the outer loop; a 240-row frame
 # would run on one thread if we looped over rows only. Loop over
 # (row, column-block) items instead; each item visits its columns in runs
-# (frame_runs, below).
+# (row_runs, below).
 COLUMN_BLOCKS = 4
 
 
@@ -43,7 +43,7 @@ def column_blocks(width: int, arch: str) -> int:
 # taichi 1.7 does not loop-vectorise ndarray loops (see kernels/cdnf.py), but it does
 # SLP-vectorise straight-line code. A row kernel therefore visits its columns in runs:
 # CHUNK consecutive columns at a time, written once as a function of vectors of n
-# columns (``run_load``/``run_store``), called with n = CHUNK where the 3x3 neighbours
+# columns (``run_load``/``plane_store``), called with n = CHUNK where the 3x3 neighbours
 # are inside the frame and with n = 1 at the borders (neighbour columns clamped:
 # the replicate border) and for the last columns of a segment.
 
@@ -110,10 +110,6 @@ MAX_STEPS = 32  # updates per launch of the solve kernels (steps_per_launch <= 3
 
 RECORD_COEFS = 2  # columns 0, 1 of a launch record: lam, mom
 
-#: The photoreceptor planes of a stacked state array (:func:`photoreceptors`): ``L`` (the last frame's
-#: grey levels) and ``P`` (the luminance change).
-L_PLANE, P_PLANE = 0, 1
-
 
 class LaunchRecord:
     """The ``(lam, mom)`` in and the residuals out of one solve launch, as one float32 array.
@@ -174,7 +170,7 @@ def context(name: str, fields: str, grid: str | None = None):
     (``ctx.u_on``), never by position. Build one in a kernel as ``ti.static(Ctx(...))``.
 
     ``grid`` names the member whose last two dimensions are the frame's ``(H, W)`` (an array of
-    shape (H, W) or (planes, H, W)): the context's ``grid`` property, which :func:`frame_runs`
+    shape (H, W) or (planes, H, W)): the context's ``grid`` property, which a row-run helper
     reads (a property, not a member: it passes nothing more to a function).
     """
     base = collections.namedtuple(name, fields)
@@ -282,7 +278,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
         """Row and column range [j0, j1) of work item ``k`` (row-major items)."""
         i = k // blocks
         b = k % blocks
-        bw = ((width + blocks - 1) // blocks + CHUNK - 1) // CHUNK * CHUNK  # whole runs (frame_runs)
+        bw = ((width + blocks - 1) // blocks + CHUNK - 1) // CHUNK * CHUNK  # whole runs (row_runs)
         j0 = ti.min(b * bw, width)
         j1 = ti.min(j0 + bw, width)
         return i, j0, j1
@@ -295,13 +291,6 @@ def build(ti, lanes: int) -> SimpleNamespace:
         for c in ti.static(range(n)):
             v[c] = ti.cast(x[i, j + c], ti.f32)
         return v
-
-
-    @ti.func
-    def run_store(x: ti.template(), i, j, v, n: ti.template()):
-        """``x[i, j .. j + n - 1] = v``."""
-        for c in ti.static(range(n)):
-            x[i, j + c] = v[c]
 
 
     @ti.func
@@ -321,17 +310,6 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
 
     @ti.func
-    def photoreceptors(frame: ti.template(), x: ti.template(), i, j, n: ti.template(), scale, keep):
-        """:func:`luminance_change` on a stacked state array ``x``: ``L`` and ``P`` are its planes
-        :data:`L_PLANE` and :data:`P_PLANE`. Returns ``P`` of the run."""
-        g = run_load(frame, i, j, n) * scale
-        p = keep * (g - plane_load(x, L_PLANE, i, j, n))
-        plane_store(x, L_PLANE, i, j, g, n)
-        plane_store(x, P_PLANE, i, j, p, n)
-        return p
-
-
-    @ti.func
     def _combine(acc, r, reduce: ti.template()):
         """``acc + r`` (``reduce == "sum"``) or ``max(acc, r)``."""
         out = acc + r
@@ -340,124 +318,11 @@ def build(ti, lanes: int) -> SimpleNamespace:
         return out
 
 
-    @ti.func
-    def frame_runs(body: ti.template(), ctx: ti.template(), k, blocks, reduce: ti.template(), halo: ti.template()):
-        """Work item ``k`` (a row's column block, :func:`block_span`) of a kernel's parallel loop over the
-        frame of ``ctx.grid`` (:func:`context`): call ``body(ctx, i, j, n)`` on its columns in runs.
-
-        Runs of ``n = CHUNK`` (then ``QUARTER``) columns ``j .. j + n - 1`` keep ``halo`` columns either
-        side inside the frame (``halo`` >= 1: the body's horizontal reach); every other column is a
-        run of one (a body that reads neighbours maps them into the frame).
-        Returns the ``reduce`` (``"sum"``: float64 sum, in column order; ``"max"``) of body's returns.
-        """
-        g = ti.static(ctx.grid)
-        W = g.shape[ti.static(len(g.shape) - 1)]
-        i, j0, j1 = block_span(k, W, blocks)
-        acc = ti.f64(0.0)
-        j = j0
-        stop = ti.min(j1, halo)
-        while j < stop:
-            acc = _combine(acc, body(ctx, i, j, 1), reduce)
-            j += 1
-        end = ti.min(j1, W - halo)
-        for n in ti.static((CHUNK, QUARTER)):
-            while j + n <= end:
-                acc = _combine(acc, body(ctx, i, j, n), reduce)
-                j += n
-        while j < j1:
-            acc = _combine(acc, body(ctx, i, j, 1), reduce)
-            j += 1
-        return acc
-
-
-    # -- separable DoG: the taps ``g1``, ``g2`` (2 R + 1 each) are in a coefficient array from slot
-    # ``at`` (``g1`` first); the row passes are two planes of a stacked array --
-
-    DogRowRunCtx = context("DogRowRunCtx", "v x rows coef at mode R", grid="v")
-
-    @ti.func
-    def _dog_row_run(ctx: ti.template(), i, j, n: ti.template()):
-        src, x, coef = ti.static(ctx.v, ctx.x, ctx.coef)
-        rows = ctx.rows
-        at, mode, R = ti.static(ctx.at, ctx.mode, ctx.R)
-        W = src.shape[1]
-        a1 = ti.Vector([0.0] * n, dt=ti.f32)
-        a2 = ti.Vector([0.0] * n, dt=ti.f32)
-        for d in ti.static(range(-R, R + 1)):
-            v = ti.Vector([0.0] * n, dt=ti.f32)
-            if ti.static(n == 1):  # a column near the border: map the tap into the frame
-                v[0] = border_weight(j + d, W, mode) * src[i, border_index(j + d, W, mode)]
-            else:  # a run with every tap inside the frame
-                v = run_load(src, i, j + d, n)
-            a1 += coef[at + d + R] * v
-            a2 += coef[at + 2 * R + 1 + d + R] * v
-        plane_store(x, rows, i, j, a1, n)
-        plane_store(x, rows + 1, i, j, a2, n)
-        return 0.0
-
-
-    @ti.func
-    def dog_row_pass(v: ti.template(), x: ti.template(), rows, coef: ti.template(), at: ti.template(), blocks,
-                     mode: ti.template(), R: ti.template()):
-        """Horizontal passes of a separable DoG of ``v`` (H, W) into planes of ``x``: plane ``rows`` =
-        ``g1 (*)_x v``, plane ``rows + 1`` = ``g2 (*)_x v``.
-
-        ``g1``/``g2`` are 1-D profiles of length ``2R + 1`` at ``coef[at:]`` (``R`` a compile-time
-        radius: the taps unroll). Called at a kernel's top level, the loop is the kernel's
-        parallel loop over (row, column-block) items. ``v`` is an array of its own, not a plane
-        of a stacked one: read through a runtime plane index, the border columns' taps compiled
-        to other roundings (the traces were no longer bit-identical).
-        """
-        for k in range(v.shape[0] * blocks):
-            dog_row_item(v, x, rows, coef, at, k, blocks, mode, R)
-
-
-    @ti.func
-    def dog_row_item(v: ti.template(), x: ti.template(), rows, coef: ti.template(), at: ti.template(), k, blocks,
-                     mode: ti.template(), R: ti.template()):
-        """Work item ``k`` (a row's column block, :func:`block_span`) of :func:`dog_row_pass`."""
-        ctx = ti.static(DogRowRunCtx(v, x, rows, coef, at, mode, R))
-        frame_runs(_dog_row_run, ctx, k, blocks, "sum", ti.static(max(R, 1)))
-
-
-    @ti.func
-    def dog_column_run(x: ti.template(), rows, coef: ti.template(), at: ti.template(), A, B, i, j,
-                       n: ti.template(), mode: ti.template(), R: ti.template()):
-        """Vertical pass on the run ``(i, j .. j + n - 1)``: ``A g1 (*)_y row1 - B g2 (*)_y row2`` = ``W_s (*) v``
-        (``row1``, ``row2``: planes ``rows``, ``rows + 1`` of ``x`` from :func:`dog_row_pass`; radius ``R``,
-        unrolled; rows mapped by the border mode)."""
-        H = x.shape[1]
-        b1 = ti.Vector([0.0] * n, dt=ti.f32)
-        b2 = ti.Vector([0.0] * n, dt=ti.f32)
-        for d in ti.static(range(-R, R + 1)):
-            ii = border_index(i + d, H, mode)
-            wgt = border_weight(i + d, H, mode)
-            b1 += (coef[at + d + R] * wgt) * plane_load(x, rows, ii, j, n)
-            b2 += (coef[at + 2 * R + 1 + d + R] * wgt) * plane_load(x, rows + 1, ii, j, n)
-        return A * b1 - B * b2
-
-
     @ti.kernel
     def fill(x: F2, value: ti.f32):
         """Set every element of ``x`` to ``value``."""
         for i, j in x:
             x[i, j] = value
-
-
-    @ti.kernel
-    def fill_planes(x: F3, k0: ti.i32, k1: ti.i32, value: ti.f32):
-        """Set every element of planes ``k0 .. k1 - 1`` of ``x`` to ``value``."""
-        for k, i, j in ti.ndrange((k0, k1), x.shape[1], x.shape[2]):
-            x[k, i, j] = value
-
-
-    @ti.kernel
-    def copy_plane(x: F3, src: ti.i32, dst: ti.i32):
-        """Plane ``dst`` of ``x`` = plane ``src``."""
-        for i, j in ti.ndrange(x.shape[1], x.shape[2]):
-            x[dst, i, j] = x[src, i, j]
-
-
 
 
     def lane_layout(width: int) -> tuple[int, int]:
@@ -575,26 +440,6 @@ def build(ti, lanes: int) -> SimpleNamespace:
             lo[l] = b[l - 1]
             hi[l - 1] = b[l]
         return lo, hi
-
-
-    @ti.func
-    def launch_gate(record: ti.template(), j: ti.template(), n, tol, grow, fields: ti.template()):
-        """Whether update ``j`` (compile-time) of a launch of ``n`` runs, from the residuals of the
-        updates before it in ``record`` (:class:`LaunchRecord`): 1 if ``j < n`` and none of them
-        converged (every residual ``<= tol``), grew (:func:`go_on`) or was not run, else 0.
-
-        Generic solve kernels (one parallel loop per update) call it in every work item; the
-        record's earlier rows are final by then (the loops of a launch run one after another).
-        """
-        go = ti.select(j < n, 1, 0)
-        best = ti.f32(3.0e38)
-        for k in ti.static(range(j)):
-            r = record[k, RECORD_COEFS]
-            for f in ti.static(range(1, fields)):
-                r = ti.max(r, record[k, RECORD_COEFS + f])
-            g, best = go_on(r, best, tol, grow)
-            go = go & g
-        return go
 
 
     @ti.func

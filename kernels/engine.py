@@ -35,24 +35,26 @@ from .schedule import Plan
 MAX_RESULTS = 8
 #: The lowest value a ``maxes`` result starts from.
 LOWEST = -3.0e38
+#: ``(EMPTY_LO, EMPTY_HI)``: an empty pending span (:class:`Span`).
+EMPTY_LO, EMPTY_HI = 1 << 24, -1
 
 
 class Plane:
     """A named plane of a model's state: ``slot`` in the stacked array; ``buffers`` 2 for a ping-pong pair,
     whose ``now`` (the backend's parity) and ``before`` buffers are :attr:`now` and :attr:`before`."""
 
-    def __init__(self, name: str, slot: int, buffers: int = 1, side: int = 0):
-        self.name, self.slot, self.buffers, self.side = name, slot, buffers, side
+    def __init__(self, name: str, slot: int, buffers: int = 1, side: int = 0, bit: int = 0):
+        self.name, self.slot, self.buffers, self.side, self.bit = name, slot, buffers, side, bit
 
     @property
     def now(self) -> "Plane":
-        return self if self.buffers == 1 else Plane(self.name, self.slot, 2, 0)
+        return self if self.buffers == 1 else Plane(self.name, self.slot, 2, 0, self.bit)
 
     @property
     def before(self) -> "Plane":
         if self.buffers == 1:
             raise ValueError(f"plane {self.name} has one buffer")
-        return Plane(self.name, self.slot, 2, 1)
+        return Plane(self.name, self.slot, 2, 1, self.bit)
 
 
 class _Names:
@@ -77,13 +79,15 @@ class Planes(_Names):
     """The state planes of a model, by name: ``Planes("L P:2 S")`` (``:2``: a ping-pong pair)."""
 
     def __init__(self, spec: str):
-        items, slot = {}, 0
+        items, slot, pairs = {}, 0, 0
         for word in spec.split():
             name, _, n = word.partition(":")
-            items[name] = Plane(name, slot, int(n or 1))
+            items[name] = Plane(name, slot, int(n or 1), bit=pairs)
             slot += items[name].buffers
+            pairs += items[name].buffers == 2
         super().__init__(items)
         self.count = slot
+        self.pairs = pairs  # the bits of the backend's parity mask (one per pair)
 
 
 class Coef:
@@ -130,22 +134,61 @@ def coefficient_array(coefs: Coefs, values: dict) -> "list[float]":
     return out or [0.0]
 
 
+class Span:
+    """A group of fields' *pending spans* (lane layout): per row and parity of ``pair`` (the pair the group
+    follows), the lane elements ``[lo, hi]`` where something changed since the group was last updated there.
+    They live in element 0 of the model's scratch plane ``store`` (lanes 0-3: ``lo``, ``hi`` of parity 0,
+    then of parity 1; float32, exact for any width). A frame's first state, and :meth:`reset`, mark every
+    element pending."""
+
+    def __init__(self, store: Plane, pair: Plane):
+        if store.buffers != 1 or pair.buffers != 2:
+            raise ValueError("a span group is kept in a plane of one buffer and follows a pair")
+        self.store, self.pair = store, pair
+
+
 class Stage:
     """A stage: ``fn(a)`` on every cell, then the reductions of what it returns (``sums``/``maxes``: the
     names of its results, in the order it returns them; one kind per stage), the ghost columns of the
     planes in ``ghosts`` refreshed after each row (lane layout; ``halo`` columns). An update stage of a
-    solve returns ``residuals`` (1 or 2) values instead, maxed per update (:class:`Launch`)."""
+    solve returns ``residuals`` (1 or 2) values instead, maxed per update (:class:`Launch`).
 
-    def __init__(self, fn, sums: str = "", maxes: str = "", ghosts=(), halo: "int | str" = 1, residuals: int = 0):
+    A **relaxation** update (``relax``: 1 or 2 pairs) returns ``d = F(u) - u`` of each pair instead (``u``
+    its ``now`` buffer at this update); the engine writes ``u + mom (u - prev) + lam d`` (``lam, mom`` the
+    record's columns 0, 1; ``prev`` the ``before`` buffer, which it overwrites) and maxes ``|d|`` as the
+    residuals; the solve's updates alternate the pairs' buffers. On the lane layout, lanes with
+    ``|d| <= tau`` (the launch scalar ``tau``) keep ``u`` exactly, and with ``spans`` (a :class:`Span`)
+    the update visits only the elements within one element and ``rows`` rows (a number or an option's
+    name) of a pending span of its parity, and leaves the elements it moved as the other parity's spans;
+    it refreshes the ghost columns (``halo``) of the buffers it wrote. A stage with ``spans`` and no
+    ``relax`` visits the same elements and does nothing else (a pass an update reads). A stage that
+    ``marks`` a span group returns whether it changed anything at the cell (``a.any(...)``): those
+    elements become pending in both parities. The pixel layout visits every pixel and never freezes."""
+
+    def __init__(self, fn, sums: str = "", maxes: str = "", ghosts=(), halo: "int | str" = 1, residuals: int = 0,
+                 relax=(), spans: "Span | None" = None, rows: "int | str" = 0, marks: "Span | None" = None):
         if sums and maxes:
             raise ValueError("a stage reduces by one kind (sums or maxes)")
+        relax = tuple(relax)
+        residuals = len(relax) or int(residuals)
         if residuals and (sums or maxes or residuals > 2):
             raise ValueError("an update stage returns its 1 or 2 residuals only")
-        self.fn, self.ghosts, self.halo, self.residuals = fn, tuple(ghosts), halo, int(residuals)
+        if marks is not None and (sums or maxes or relax or spans is not None):
+            raise ValueError("a stage that marks spans returns whether it changed the cell only")
+        if any(p.buffers != 2 for p in relax) or (spans is not None and relax and spans.pair.slot != relax[0].slot):
+            raise ValueError("a relaxation updates pairs, and its spans follow its first pair")
+        self.fn, self.ghosts, self.halo, self.residuals = fn, tuple(ghosts), halo, residuals
+        self.relax, self.spans, self.rows, self.marks = relax, spans, rows, marks
+        self.marking = marks is not None
         self.results = tuple((sums or maxes).split())
         self.kind = "max" if maxes else "sum"
         if len(self.results) > 2:
             raise ValueError("a stage returns at most two results")
+
+    @property
+    def visits(self) -> bool:
+        """Whether the engine's span iterator runs the stage (lane layout)."""
+        return bool(self.relax) or self.spans is not None or self.marks is not None
 
 
 class Launch:
@@ -154,7 +197,9 @@ class Launch:
     A solve also has ``update`` stages (at most 2): after the ``before`` stages, up to ``updates`` updates
     run while the residuals they return stay above ``tol`` and do not grow past ``grow`` times the best
     (those three are launch scalars of ``scalars``), then ``stages`` run if the solve converged. An update
-    reads its index as ``a.step`` and its row of the launch record as ``a.record(k)``."""
+    reads its index as ``a.step`` and its row of the launch record as ``a.record(k)``. The pairs its
+    relaxation stages update alternate their buffers: at update ``j``, and in ``stages`` after ``j``
+    updates, their ``now`` is the buffer ``j`` turns past the backend's parity."""
 
     def __init__(self, name: str, *stages: Stage, update=(), before=(), scalars: "Scalars | None" = None):
         self.name, self.stages = name, tuple(stages)
@@ -165,6 +210,13 @@ class Launch:
             if scalars is None or not all(hasattr(scalars, n) for n in ("updates", "tol", "grow")):
                 raise ValueError(f"{name}: a solve needs the launch scalars updates, tol, grow")
             self.controls = (scalars.updates.slot, scalars.tol.slot, scalars.grow.slot)
+        #: the pairs the updates alternate (bits of the backend's parity mask)
+        self.alternates = tuple(sorted({p.bit for s in self.update for p in s.relax}))
+        self.tau = None
+        if any(s.relax for s in self.update):
+            if not hasattr(scalars, "tau"):
+                raise ValueError(f"{name}: a relaxation needs the launch scalar tau")
+            self.tau = scalars.tau.slot
         stages = self.before + self.stages
         self.results = tuple(r for s in stages for r in s.results)
         if len(self.results) > MAX_RESULTS:
@@ -187,6 +239,14 @@ class Layout:
     def halo(self, stage: "Stage") -> int:
         """The ghost columns ``stage`` refreshes: its ``halo``, a number or the name of an option."""
         return self.options[stage.halo] if isinstance(stage.halo, str) else stage.halo
+
+    def rows(self, stage: "Stage") -> int:
+        """The rows either side of a pending span that ``stage`` visits: its ``rows``, a number or an option."""
+        return self.options[stage.rows] if isinstance(stage.rows, str) else stage.rows
+
+    def turns(self, plane: Plane) -> bool:
+        """Whether ``plane`` is a pair that the launch's updates alternate."""
+        return plane.buffers == 2 and plane.bit in self.launch.alternates
 
     def border(self, plane: Plane) -> tuple[int, bool]:
         return self.modes.get(plane.slot, (REPLICATE, False))
@@ -219,14 +279,23 @@ def build(ti, lanes: int) -> SimpleNamespace:
     F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 
     @ti.func
-    def _index(c, plane: ti.template()):
-        """The slot of ``plane`` (a pair's buffer by the parity ``c``)."""
+    def _index(c, plane: ti.template(), turn):
+        """The slot of ``plane``: a pair's buffer by its bit of the parity mask ``c``, turned ``turn`` times."""
         k = plane.slot
-        if ti.static(plane.buffers == 2 and plane.side == 0):
-            k = plane.slot + c
-        elif ti.static(plane.buffers == 2):
-            k = plane.slot + 1 - c
+        if ti.static(plane.buffers == 2):
+            p = ((c >> ti.static(plane.bit)) ^ turn) & 1
+            k = plane.slot + p
+            if ti.static(plane.side == 1):
+                k = plane.slot + 1 - p
         return k
+
+    @ti.func
+    def _turn(spec: ti.template(), plane: ti.template(), j):
+        """How many times the launch's updates turned ``plane``'s buffers at update (or after) ``j``."""
+        t = 0
+        if ti.static(spec.turns(plane)):
+            t = j
+        return t
 
     @ti.func
     def _rows(i, H, mode: ti.template()):
@@ -253,6 +322,20 @@ def build(ti, lanes: int) -> SimpleNamespace:
     def _lane_window3(x: ti.template(), k, i, e, mode: ti.template()):
         im, ip = _rows(i, x.shape[1], mode)
         return C.lane_edge_diag(x, k, im, i, ip, e)
+
+    @ti.func
+    def _lane_smooth3(x: ti.template(), k, i, e, mode: ti.template(), k0, k1):
+        """``W (*) x`` for ``W = k k^T``, ``k = (k1, k0, k1)``: vertical sums ``c = k0 u[i] + k1 (u[i-1] + u[i+1])``
+        of the element and its neighbours' adjacent lanes, then ``k0 c + k1 (c[j-1] + c[j+1])``."""
+        H = x.shape[1]
+        im, ip = C.border_index(i - 1, H, mode), C.border_index(i + 1, H, mode)
+        wim, wip = ti.f32(C.border_weight(i - 1, H, mode)), ti.f32(C.border_weight(i + 1, H, mode))
+        c_left = k0 * x[k, i, e - 1][LANES - 1] + k1 * (wim * x[k, im, e - 1][LANES - 1]
+                                                        + wip * x[k, ip, e - 1][LANES - 1])
+        c_cur = k0 * x[k, i, e] + k1 * (wim * x[k, im, e] + wip * x[k, ip, e])
+        c_right = k0 * x[k, i, e + 1][0] + k1 * (wim * x[k, im, e + 1][0] + wip * x[k, ip, e + 1][0])
+        left, right = C.lane_neighbours(c_left, c_cur, c_right)
+        return k0 * c_cur + k1 * (left + right)
 
     @ti.func
     def _lane_put(x: ti.template(), k, i, e, v, ring: ti.template(), W: ti.template()):
@@ -324,6 +407,18 @@ def build(ti, lanes: int) -> SimpleNamespace:
         return _pixel_at(x, k, i, j, mode, 0, 0), edge, diag
 
     @ti.func
+    def _pixel_smooth3(x: ti.template(), k, i, j, mode: ti.template(), w0, w1, w2):
+        """``W (*) x`` for a symmetric 3x3 ``W``: centre weight ``w0``, edge ``w1``, diagonal ``w2``."""
+        H, W = x.shape[1], x.shape[2]
+        im, ip = C.border_index(i - 1, H, mode), C.border_index(i + 1, H, mode)
+        jm, jp = C.border_index(j - 1, W, mode), C.border_index(j + 1, W, mode)
+        wim, wip = C.border_weight(i - 1, H, mode), C.border_weight(i + 1, H, mode)
+        wjm, wjp = C.border_weight(j - 1, W, mode), C.border_weight(j + 1, W, mode)
+        edge = wim * x[k, im, j] + wip * x[k, ip, j] + wjm * x[k, i, jm] + wjp * x[k, i, jp]
+        diag = wim * (wjm * x[k, im, jm] + wjp * x[k, im, jp]) + wip * (wjm * x[k, ip, jm] + wjp * x[k, ip, jp])
+        return w0 * x[k, i, j] + w1 * edge + w2 * diag
+
+    @ti.func
     def _pixel_put(x: ti.template(), k, i, j, v, ring: ti.template()):
         if ti.static(ring):
             H, W = x.shape[1], x.shape[2]
@@ -370,8 +465,9 @@ def build(ti, lanes: int) -> SimpleNamespace:
             """Whether the launch's input is an event bin (2, H, W) of ``(p_on, p_off)``."""
             return len(self.frame.shape) == 3
 
+        @_dsl
         def _k(self, plane):
-            return _index(self.c, plane)
+            return _index(self.c, plane, self.step if self.spec.turns(plane) else 0)
 
         @_dsl
         def at(self, plane, di=0, dj=0):
@@ -384,6 +480,44 @@ def build(ti, lanes: int) -> SimpleNamespace:
             """``(centre, edge sum, diagonal sum)`` of the 3x3 window of ``plane``."""
             mode = self.spec.border(plane)[0]
             return (_lane_window3 if self.lane else _pixel_window3)(self.x, self._k(plane), self.i, self.j, mode)
+
+        @_dsl
+        def smooth3(self, plane, k, w):
+            """``W (*) plane`` for a symmetric separable 3x3 ``W = k k^T`` (``k``: a coefficient ``(k0, k1)``,
+            ``k = (k1, k0, k1)``; ``w``: W's centre, edge and diagonal weights): summed separably on the lane
+            layout, by weights on the pixel layout (two roundings of the same sum)."""
+            mode = self.spec.border(plane)[0]
+            if self.lane:
+                return _lane_smooth3(self.x, self._k(plane), self.i, self.j, mode, self.coef(k, 0), self.coef(k, 1))
+            return _pixel_smooth3(self.x, self._k(plane), self.i, self.j, mode, self.coef(w, 0), self.coef(w, 1),
+                                  self.coef(w, 2))
+
+        @_dsl
+        def taps(self, plane, name: str, vertical: bool = False):
+            """``sum_d g[d] plane(offset d)``, ``d = -R .. R`` along the columns (rows if ``vertical``), for the
+            symmetric taps ``g`` (``2 R + 1`` floats), the compile-time option ``name`` (constants in the code):
+            the lane layout adds the centre, then the pairs ``g[d] (x[-d] + x[d])``; the pixel layout adds the
+            taps in order from ``-R``."""
+            g = self.spec.options[name]
+            R = len(g) // 2
+
+            def at(d):
+                return self.at(plane, d, 0) if vertical else self.at(plane, 0, d)
+
+            if self.lane:
+                acc = g[R] * at(0)
+                for d in range(1, R + 1):
+                    acc = acc + g[R + d] * (at(-d) + at(d))
+                return acc
+            acc = self.zeros()
+            for d in range(-R, R + 1):
+                acc = acc + g[R + d] * at(d)
+            return acc
+
+        @_dsl
+        def frame_mask(self):
+            """1.0 on the cell's frame columns, 0.0 on a lane past the frame's last column."""
+            return C.lane_mask(self.j, self.spec.W) if self.lane else 1.0
 
         @_dsl
         def put(self, plane, value):
@@ -431,6 +565,11 @@ def build(ti, lanes: int) -> SimpleNamespace:
             """An earlier stage's reduction ``name`` in this launch (float64)."""
             k = self.spec.launch.slot(name)
             return self.got[k] if k < len(self.got) else _read(res, k)
+
+        @_dsl
+        def any(self, cond):
+            """Whether ``cond`` holds on any lane of the cell (a stage that marks spans returns it)."""
+            return C.any_lane(cond) if self.lane else ti.select(cond, 1, 0)
 
         @_dsl
         def zeros(self):
@@ -493,8 +632,8 @@ def build(ti, lanes: int) -> SimpleNamespace:
                         a0 = _combine(a0, _reduce_lane(r0, e, W, kind), kind)
                         a1 = _combine(a1, _reduce_lane(r1, e, W, kind), kind)
                 for g in ti.static(stage.ghosts):
-                    C.fill_ghosts(ctx.x, _index(ctx.c, g), i, 1, 1, W, ti.static(ctx.spec.halo(stage)),
-                                  ti.static(ctx.spec.border(g)[0]))
+                    C.fill_ghosts(ctx.x, _index(ctx.c, g, _turn(ctx.spec, g, j)), i, 1, 1, W,
+                                  ti.static(ctx.spec.halo(stage)), ti.static(ctx.spec.border(g)[0]))
             if ti.static(stage.residuals >= 1):
                 ti.atomic_max(sched.rbuf[j, 0], run_max(m0, LANES))
             if ti.static(stage.residuals == 2):
@@ -506,25 +645,153 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
         return run
 
+    # -- pending spans (lane layout): the elements a span group's stage visits, and what it leaves ------------
+    @ti.func
+    def _span_get(x: ti.template(), k, r, lane: ti.template()):
+        return ti.cast(x[k, r, 0][lane], ti.i32)
+
+    @ti.func
+    def _visit(x: ti.template(), k, p, i, rows, E1: ti.template()):
+        """Elements ``[e0, e1)`` to visit in row ``i``: one either side of the pending spans of parity ``p`` of
+        rows ``i - rows .. i + rows`` (clipped) of the span plane ``k``."""
+        lo, hi = EMPTY_LO, EMPTY_HI
+        for r in range(ti.max(i - rows, 0), ti.min(i + rows, x.shape[1] - 1) + 1):
+            lo = ti.min(lo, ti.select(p == 0, _span_get(x, k, r, 0), _span_get(x, k, r, 2)))
+            hi = ti.max(hi, ti.select(p == 0, _span_get(x, k, r, 1), _span_get(x, k, r, 3)))
+        return ti.max(lo - 1, 1), ti.min(hi + 1, E1) + 1
+
+    @ti.func
+    def _span_set(x: ti.template(), k, i, p, lo, hi):
+        """Parity ``p``'s span of row ``i`` = ``[lo, hi]``."""
+        if p == 0:
+            C._lane_put(x, k, i, 0, 0, ti.cast(lo, ti.f32))
+            C._lane_put(x, k, i, 0, 1, ti.cast(hi, ti.f32))
+        else:
+            C._lane_put(x, k, i, 0, 2, ti.cast(lo, ti.f32))
+            C._lane_put(x, k, i, 0, 3, ti.cast(hi, ti.f32))
+
+    @ti.func
+    def _span_mark(x: ti.template(), k, i, lo, hi):
+        """Both parities' spans of row ``i`` grow to include ``[lo, hi]``."""
+        if lo <= hi:
+            _span_set(x, k, i, 0, ti.min(_span_get(x, k, i, 0), lo), ti.max(_span_get(x, k, i, 1), hi))
+            _span_set(x, k, i, 1, ti.min(_span_get(x, k, i, 2), lo), ti.max(_span_get(x, k, i, 3), hi))
+
+    @ti.func
+    def _settle(a: ti.template(), pair: ti.template(), d):
+        """The relaxation of ``pair`` at the cell ``a`` by ``d = F(u) - u`` (see :class:`Stage`); returns ``|d|``
+        (lane layout: 0 off the frame) and whether a value moved (lane layout: ``|d| > tau`` on a lane)."""
+        k_u, k_prev = a._k(pair.now), a._k(pair.before)
+        u, prev = a.x[k_u, a.i, a.j], a.x[k_prev, a.i, a.j]
+        nx = u + a.record(1) * (u - prev) + a.record(0) * d
+        ad = a.zeros()
+        moved = 0
+        if ti.static(a.lane):
+            tau = _read(a.fr, ti.static(a.spec.launch.tau))
+            ad = C.lane_abs(d) * C.lane_mask(a.j, a.spec.W)
+            a.x[k_prev, a.i, a.j] = ti.select(ad > tau, nx, u)
+            moved = ti.select(run_max(ad, LANES) > tau, 1, 0)
+        else:
+            ad = ti.abs(d)
+            a.x[k_prev, a.i, a.j] = nx
+        return ad, moved
+
+    @ti.func
+    def _lane_max(v, lane: ti.template()):
+        """The largest lane of ``v`` (lane layout), or ``v`` (a pixel)."""
+        if ti.static(lane):
+            return run_max(v, LANES)
+        else:
+            return v
+
+    @ti.func
+    def _cell_visit(stage: ti.template(), a: ti.template()):
+        """``stage`` at the cell ``a``: its residuals' lane maxima (0 where none) and whether it moved
+        or (a marking stage) changed anything."""
+        n, marks = ti.static(len(stage.relax), stage.marking)
+        r0, r1, moved = ti.f32(0.0), ti.f32(0.0), 0
+        if ti.static(n == 1):
+            ad, mv = _settle(a, stage.relax[0], stage.fn(a))
+            r0, moved = _lane_max(ad, a.lane), mv
+        elif ti.static(n == 2):
+            d0, d1 = stage.fn(a)
+            ad0, mv0 = _settle(a, stage.relax[0], d0)
+            ad1, mv1 = _settle(a, stage.relax[1], d1)
+            r0, r1, moved = _lane_max(ad0, a.lane), _lane_max(ad1, a.lane), mv0 | mv1
+        elif ti.static(marks):
+            moved = stage.fn(a)
+        else:
+            stage.fn(a)
+        return r0, r1, moved
+
+    def _span_stage(stage: Stage):
+        """The scheduler's stage ``run(ctx, i0, i1, j)`` of a relaxation, span or marking stage (lane layout)."""
+        group = stage.spans if stage.spans is not None else stage.marks
+        n = len(stage.relax)
+        grouped, visits, marks = group is not None, stage.spans is not None, stage.marks is not None
+        refreshed = tuple(q.before for q in stage.relax) + stage.ghosts  # the buffers written, then the others
+        k_span = group.store.slot if grouped else 0
+
+        @ti.func
+        def run(ctx: ti.template(), i0, i1, j):
+            W = ti.static(ctx.spec.W)
+            E1 = ti.static((LANES + W - 1) // LANES)
+            rows = ti.static(ctx.spec.rows(stage))
+            p0 = _read(res, 0)
+            m0, m1 = ti.f32(0.0), ti.f32(0.0)
+            for i in range(i0, i1):
+                e0, e1 = 1, E1 + 1
+                p = 0
+                if ti.static(grouped):
+                    p = ((ctx.c >> ti.static(group.pair.bit)) ^ _turn(ctx.spec, group.pair, j)) & 1
+                    if ti.static(visits):
+                        e0, e1 = _visit(ctx.x, k_span, p, i, rows, E1)
+                lo, hi = EMPTY_LO, EMPTY_HI
+                for e in range(e0, e1):
+                    r0, r1, moved = _cell_visit(stage, ctx.spec.cell(ctx, i, e, (p0,), j))
+                    m0, m1 = ti.max(m0, r0), ti.max(m1, r1)
+                    lo = ti.select(moved != 0, ti.min(lo, e), lo)
+                    hi = ti.select(moved != 0, e, hi)
+                if ti.static(n > 0 and visits):
+                    _span_set(ctx.x, k_span, i, 1 - p, lo, hi)
+                if ti.static(marks):
+                    _span_mark(ctx.x, k_span, i, lo, hi)
+                if e0 < e1:
+                    for g in ti.static(refreshed):
+                        C.fill_ghosts(ctx.x, _index(ctx.c, g, _turn(ctx.spec, g, j)), i,
+                                      e0 == 1, e1 == E1 + 1, W, ti.static(ctx.spec.halo(stage)),
+                                      ti.static(ctx.spec.border(g)[0]))
+            if ti.static(n >= 1):
+                ti.atomic_max(sched.rbuf[j, 0], m0)
+            if ti.static(n == 2):
+                ti.atomic_max(sched.rbuf[j, 1], m1)
+
+        return run
+
     @ti.func
     def _pixel_stage(ctx: ti.template(), stage: ti.template(), step):
         """One parallel loop of ``stage`` over the pixels (the pixel layout); an update's residuals are
         maxed into the launch record's row ``step`` (columns 2..)."""
         n = ti.static(len(stage.results))
         for i, j in ti.ndrange(ctx.x.shape[1], ctx.x.shape[2]):
-            if ti.static(stage.residuals == 1):
+            if ti.static(len(stage.relax) > 0):
+                r0, r1, moved = _cell_visit(stage, ctx.spec.cell(ctx, i, j, (), step))
+                ti.atomic_max(ctx.rec[step, 2], r0)
+                if ti.static(len(stage.relax) == 2):
+                    ti.atomic_max(ctx.rec[step, 3], r1)
+            elif ti.static(stage.residuals == 1):
                 ti.atomic_max(ctx.rec[step, 2], stage.fn(ctx.spec.cell(ctx, i, j, (), step)))
             elif ti.static(stage.residuals == 2):
                 q0, q1 = stage.fn(ctx.spec.cell(ctx, i, j, (), step))
                 ti.atomic_max(ctx.rec[step, 2], q0)
                 ti.atomic_max(ctx.rec[step, 3], q1)
             elif ti.static(n == 0):
-                stage.fn(ctx.spec.cell(ctx, i, j))
+                stage.fn(ctx.spec.cell(ctx, i, j, (), step))
             elif ti.static(n == 1):
-                _publish(ti.static(ctx.spec.launch.slot(stage.results[0])), ti.cast(stage.fn(ctx.spec.cell(ctx, i, j)),
-                                                                                   ti.f64), stage.kind)
+                _publish(ti.static(ctx.spec.launch.slot(stage.results[0])),
+                         ti.cast(stage.fn(ctx.spec.cell(ctx, i, j, (), step)), ti.f64), stage.kind)
             else:
-                r0, r1 = stage.fn(ctx.spec.cell(ctx, i, j))
+                r0, r1 = stage.fn(ctx.spec.cell(ctx, i, j, (), step))
                 _publish(ti.static(ctx.spec.launch.slot(stage.results[0])), ti.cast(r0, ti.f64), stage.kind)
                 _publish(ti.static(ctx.spec.launch.slot(stage.results[1])), ti.cast(r1, ti.f64), stage.kind)
 
@@ -573,9 +840,12 @@ def build(ti, lanes: int) -> SimpleNamespace:
         spec = Layout(launch, lane, W, modes, options)
         spec.cell = _cell_class(spec)
         if lane:
-            run_plan = workers(Plan(before=tuple(_row_stage(s) for s in launch.before),
-                                    update=tuple(_row_stage(s) for s in launch.update),
-                                    after=tuple(_row_stage(s) for s in launch.stages), controls=_controls_of(launch)))
+            def row(s):
+                return _span_stage(s) if s.visits else _row_stage(s)
+
+            run_plan = workers(Plan(before=tuple(row(s) for s in launch.before),
+                                    update=tuple(row(s) for s in launch.update),
+                                    after=tuple(row(s) for s in launch.stages), controls=_controls_of(launch)))
 
             @ti.kernel
             def run_lanes(x: C.LANE3, coef: F1, fr: F1, frame: ti.types.ndarray(), c: ti.i32, nw: ti.i32,
@@ -605,9 +875,11 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
 
 def model(planes: Planes, coefs: Coefs, scalars: Scalars, engine_ns: SimpleNamespace, *launches: Launch,
-          initial: dict | None = None) -> SimpleNamespace:
+          initial: dict | None = None, spans: tuple = ()) -> SimpleNamespace:
     """What a model's kernel module's ``build`` returns: its declarations, its launches by name, the engine
-    (``engine_ns``: :func:`build`'s namespace) and the planes' values at reset (``initial``: plane name ->
-    a coefficient name, whose first value fills the plane; others: 0)."""
+    (``engine_ns``: :func:`build`'s namespace), the planes' values at reset (``initial``: plane name ->
+    a coefficient name, whose first value fills the plane; others: 0) and its span groups (``spans``:
+    :class:`Span` each, every element pending at reset)."""
     return SimpleNamespace(planes=planes, coefs=coefs, scalars=scalars, engine=engine_ns,
-                           launches={launch.name: launch for launch in launches}, initial=dict(initial or {}))
+                           launches={launch.name: launch for launch in launches}, initial=dict(initial or {}),
+                           spans=tuple(spans))

@@ -1,6 +1,6 @@
 """The lane-vectorised C-DNF fast path against the NumPy float64 reference.
 
-Every kernel of the fast path (``kernels/cdnf.py``, ``lanes_*``) is checked
+Every stage of the fast path (``kernels/cdnf.py`` on the engine's lane layout) is checked
 against :mod:`cdnf_ti.reference` on generated stimuli (basic, incoherent,
 dashcam-like stand-in video) and on every border mode, at widths that are and
 are not multiples of the lane width.
@@ -9,12 +9,13 @@ import threading
 
 import numpy as np
 import pytest
+from cdnf_engine import Driver, spans
 from conftest import small_stimulus
 
 from cdnf_ti import CDNF, CDNFParams
-from cdnf_ti.backends.cdnf import LaneTaichiCDNFBackend, TaichiCDNFBackend
+from cdnf_ti.backends.engine import Backend
 from cdnf_ti.bench.inputs import standin_video
-from cdnf_ti.kernels.cdnf import EMPTY_HI
+from cdnf_ti.kernels.engine import EMPTY_HI
 from cdnf_ti.reference import NumpyCDNFBackend
 from cdnf_ti.stimuli.basic import basic_stimulus
 from cdnf_ti.stimuli.incoherent import incoherent_stimulus
@@ -26,7 +27,7 @@ BORDERS = ["replicate", "reflect", "zero"]
 
 
 def _pair(params, shape):
-    return LaneTaichiCDNFBackend(params, shape), NumpyCDNFBackend(params, shape)
+    return Driver(params, shape), NumpyCDNFBackend(params, shape)
 
 
 def _assert_fields_close(fast, ref, atol):
@@ -70,7 +71,7 @@ def test_fast_path_matches_reference_over_a_whole_stimulus_with_odd_width(border
     fast = CDNF(p)
     a = fast.run(stim.frames())
     b = CDNF(p, backend="numpy").run(stim.frames())
-    assert isinstance(fast._be, LaneTaichiCDNFBackend)
+    assert fast._be.lane
     assert np.max(np.abs(a.output - b.output)) < 1e-4
     assert np.array_equal(a.spike, b.spike)
     assert np.all(a.diagnostics["residual_sum"] < p.tol)
@@ -101,14 +102,14 @@ def test_fast_and_generic_taichi_kernels_give_the_same_trace():
     slow_model = CDNF()
     slow_model.fast = False
     slow = slow_model.run(frames)
-    assert isinstance(slow_model._be, TaichiCDNFBackend)
+    assert not slow_model._be.lane
     assert np.max(np.abs(fast.output - slow.output)) < 1e-6
 
 
 def test_narrow_frames_fall_back_to_generic_kernels():
     model = CDNF()
     model.run([np.zeros((20, 12), np.float32), np.ones((20, 12), np.float32)])
-    assert isinstance(model._be, TaichiCDNFBackend)
+    assert not model._be.lane
 
 
 def test_interleaved_models_of_one_size_keep_their_own_state():
@@ -123,18 +124,17 @@ def test_interleaved_models_of_one_size_keep_their_own_state():
     for x, y in zip(fa, fb):
         out_a.append(ma.step(x).output)
         out_b.append(mb.step(y).output)
-    assert ma._be.ws is not mb._be.ws and ma._be.ws.sync is mb._be.ws.sync
+    assert ma._be.x is not mb._be.x and ma._be.lock is mb._be.lock  # own state, shared scratch
     assert np.array_equal(np.array(out_a), alone_a)
     assert np.array_equal(np.array(out_b), alone_b)
     assert np.abs(alone_a - alone_b).max() > 1e-3  # the two streams really differ
 
 
 def _compiled_instances() -> int:
-    """Kernel instances compiled so far by the launchers of the engine's kernel modules."""
-    from cdnf_ti.taichi_runtime import kernels
+    """Kernels compiled (or loaded from the compile cache) so far in this process."""
+    from cdnf_ti.taichi_runtime import compile_count
 
-    return sum(getattr(v, "instances", lambda: 0)() for name in ("common", "cdnf", "lgmd", "sdnf")
-               for v in vars(kernels(name)).values())
+    return compile_count()
 
 
 def test_a_second_model_of_a_frame_size_compiles_nothing_new():
@@ -146,9 +146,8 @@ def test_a_second_model_of_a_frame_size_compiles_nothing_new():
 
 
 def _pending_rows(model, group):
-    be = model._be
-    spans = be.ws.spans(group)[be.c if group == "c" else be.s]
-    return int(np.sum(spans[:, 1] != EMPTY_HI)), spans.shape[0]
+    both, parity = spans(model, group)
+    return int(np.sum(both[parity][:, 1] != EMPTY_HI)), both.shape[1]
 
 
 def test_sparse_stimulus_iterates_only_rows_near_the_moving_edges():
@@ -172,8 +171,7 @@ def test_frozen_pixels_give_the_same_answer_as_iterating_everything():
     frames = list(small_stimulus("light_looming", size=96).frames())
     default = CDNF().run(frames)
     exact = CDNF()
-    exact._make_backend(frames[0].shape)
-    exact._be.tau = 0.0
+    exact.freeze = 0.0
     full = exact.run(frames)
     assert np.max(np.abs(default.output - full.output)) < 1e-6
     ref = CDNF(backend="numpy").run(frames)
@@ -184,10 +182,11 @@ def test_restoring_rest_marks_every_element_pending():
     model = CDNF()
     frames = list(small_stimulus("dark_translating", size=96).frames())[:6]
     model.run(frames)
-    model._be.restore_rest()
+    model._restore_rest()
+    e1 = -(-frames[0].shape[1] // LANES)  # the last element holding frame columns
     for group in ("c", "s"):
-        for a in model._be.ws.spans(group):  # both parities
-            assert np.all(a[:, 0] == 1) and np.all(a[:, 1] == model._be.ws.e1)
+        for a in spans(model, group)[0]:  # both parities
+            assert np.all(a[:, 0] == 1) and np.all(a[:, 1] == e1)
 
 
 @pytest.mark.parametrize("workers", [1, 3])
@@ -232,7 +231,7 @@ def _converged_frame_backend():
     model = CDNF()
     for f in frames[:3]:
         model.step(f)
-    be = model._be
+    be = Driver(model=model)
     be.load(frames[3], False)
     return model, be
 
@@ -240,12 +239,12 @@ def _converged_frame_backend():
 def test_contrast_solve_that_converges_computes_the_summation_input_of_its_result():
     model, be = _converged_frame_backend()
     res = be.contrast_iterate_many([(1.0, 0.0)] * 16)
-    assert max(res[-1]) <= be._tol32 and be._s_ready  # converged within the launch
+    assert max(res[-1]) <= np.float32(model.params.tol) and model._s_ready  # converged within the launch
     be.summation_input()  # uses what the launch computed
-    fused = be.ws.planes()[be.K.S_]
-    be._s_ready = False
-    be.summation_input()  # the stand-alone kernel on the same fields
-    assert np.array_equal(fused, be.ws.planes()[be.K.S_])
+    fused = be.planes()["S"]
+    model._s_ready = False
+    be.summation_input()  # the stand-alone launch on the same fields
+    assert np.array_equal(fused, be.planes()["S"])
 
 
 def test_summation_solve_that_converges_computes_the_mean_activation_of_its_result():
@@ -253,10 +252,10 @@ def test_summation_solve_that_converges_computes_the_mean_activation_of_its_resu
     be.contrast_iterate_many([(1.0, 0.0)] * 16)
     be.summation_input()
     res = be.summation_iterate_many([(1.0, 0.0)] * 16)
-    assert res[-1][0] <= be._tol32 and be._mean is not None
+    assert res[-1][0] <= np.float32(model.params.tol) and model._mean is not None
     fused = be.mean_activation()
-    again = be.mean_activation()  # nothing cached any more: the stand-alone kernel
-    assert be._mean is None
+    again = be.mean_activation()  # nothing cached any more: the stand-alone launch
+    assert model._mean is None
     assert abs(fused - again) < 1e-12
     ref = np.mean(np.tanh(np.maximum(be.fields()["v"].astype(np.float64), 0.0)) / np.tanh(1.0))
     assert abs(fused - ref) < 1e-6
@@ -264,10 +263,9 @@ def test_summation_solve_that_converges_computes_the_mean_activation_of_its_resu
 
 def test_lane_kernels_serve_the_cpu_and_gpus_get_the_generic_kernels():
     # the persistent workers of the solve kernels wait for each other on CPU threads only
-    p = CDNFParams()
-    assert LaneTaichiCDNFBackend.supports(p, (240, 426), "cpu")
-    assert not LaneTaichiCDNFBackend.supports(p, (240, 426), "cuda")
-    assert not LaneTaichiCDNFBackend.supports(p, (240, 20), "cpu")  # narrower than two lane elements
+    assert Backend.lane_layout(True, (240, 426), "cpu")
+    assert not Backend.lane_layout(True, (240, 426), "cuda")
+    assert not Backend.lane_layout(True, (240, 20), "cpu")  # narrower than two lane elements
 
 
 def test_contrast_launch_loads_the_frame_as_the_stand_alone_load_does():
@@ -276,12 +274,13 @@ def test_contrast_launch_loads_the_frame_as_the_stand_alone_load_does():
     for m in (fused, alone):
         m.step(frames[0])
         m.step(frames[1])
-    fused._be.load(frames[2], False)
-    fused._be.contrast_iterate_many([(1.0, 0.0)])  # loads the frame in its first phase
-    alone._be.load(frames[2], False)
-    alone._be._flush_load()  # the stand-alone kernel
-    alone._be.contrast_iterate_many([(1.0, 0.0)])
-    a, b = fused._be.fields(), alone._be.fields()
+    fused_be, alone_be = Driver(model=fused), Driver(model=alone)
+    fused_be.load(frames[2], False)
+    fused_be.contrast_iterate_many([(1.0, 0.0)])  # loads the frame in its first phase
+    alone_be.load(frames[2], False)
+    alone._flush_load()  # the stand-alone launch
+    alone_be.contrast_iterate_many([(1.0, 0.0)])
+    a, b = fused.fields(), alone.fields()
     for k in ("P", "u_on", "u_off"):
         assert np.array_equal(a[k], b[k]), k
 
@@ -290,8 +289,8 @@ def test_fields_read_right_after_load_show_the_new_frame():
     frames = [np.ascontiguousarray(f[::2, ::3]) for f in standin_video(2, seed=6)]
     model = CDNF()
     model.step(frames[0])
-    model._be.load(frames[1], False)
-    p = model._be.fields()["P"]
+    Driver(model=model).load(frames[1], False)
+    p = model.fields()["P"]
     assert np.allclose(p, frames[1].astype(np.float64) / 255.0 - frames[0] / 255.0, atol=1e-6)
 
 
@@ -303,8 +302,6 @@ def test_the_backend_prepares_its_contrast_launch_for_the_first_frames_type(dtyp
     as_float = [(f / 255.0).astype(np.float32) for f in video]
     model, floats = CDNF(), CDNF()
     frames = video if dtype == np.uint8 else as_float
-    model._make_backend(frames[0].shape, frames[0].dtype)  # what the first step does
-    assert model._be._idle_frame.dtype == dtype  # set before the backend's warm-up
     a = [model.step(f).output for f in frames][1:]
     floats.step(as_float[0])
     b = [floats.step(f).output for f in as_float[1:]]

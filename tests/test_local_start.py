@@ -1,16 +1,16 @@
 """The local start (``CDNFParams.start = "local"``): each frame's iteration starts every pixel at
-the stationary level of its own input, in the NumPy reference and in both Taichi kernel sets."""
+the stationary level of its own input, in the NumPy reference and in both layouts of the engine."""
 import numpy as np
 import pytest
+from cdnf_engine import Driver
 
 from cdnf_ti import CDNF, CDNFParams
-from cdnf_ti.backends.cdnf import LaneTaichiCDNFBackend, TaichiCDNFBackend
 from cdnf_ti.bench.inputs import standin_video
 from cdnf_ti.params import kernel_gains, resting_level, stationary_level, vartheta
 from cdnf_ti.reference import NumpyCDNFBackend
 from cdnf_ti.solver import cdnf_local_starts, local_start
 
-BACKENDS = {"lanes": LaneTaichiCDNFBackend, "generic": TaichiCDNFBackend}
+BACKENDS = {"lanes": True, "generic": False}  # the engine's lane layout, or its pixel layout
 
 
 def _dashcam(n=3):
@@ -60,7 +60,8 @@ def test_a_uniform_luminance_step_starts_at_its_fixed_point():
 def _loaded_pair(kind):
     """A Taichi backend of ``kind`` and the NumPy reference, both after loading two dashcam-like frames."""
     frames = _dashcam(2)
-    be, ref = BACKENDS[kind](CDNFParams(), frames[0].shape), NumpyCDNFBackend(CDNFParams(), frames[0].shape)
+    be = Driver(CDNFParams(), frames[0].shape, fast=BACKENDS[kind])
+    ref = NumpyCDNFBackend(CDNFParams(), frames[0].shape)
     for b in (be, ref):
         b.load(frames[0], True)
         b.load(frames[1], False)
@@ -91,7 +92,7 @@ def test_kernels_set_the_reference_start_with_the_summation_input(kind):
 @pytest.mark.parametrize("start", ["previous", "rest"])
 def test_other_starts_leave_the_fields_as_they_are_when_a_frame_loads(start):
     frames = _dashcam(2)
-    be = LaneTaichiCDNFBackend(CDNFParams(start=start), frames[0].shape)
+    be = Driver(CDNFParams(start=start), frames[0].shape)
     before = be.fields()
     be.load(frames[1], False)
     after = be.fields()

@@ -1,19 +1,18 @@
 """Solve launches: several field updates per kernel launch, coefficients in and residuals out
 through a launch record (``kernels.common.LaunchRecord``), never through a return value.
 
-The generic C-DNF kernels (GPUs and narrow frames) run up to ``TaichiCDNFBackend.steps``
-updates per launch, one parallel loop each, gated on the residuals of the updates before:
-checked here on the CPU against the NumPy float64 reference and against one update per
-launch, on dashcam-like video.
+C-DNF's solves on the pixel layout (GPUs and narrow frames) run the solver's updates one parallel loop
+each, gated on the residuals of the updates before: checked here on the CPU against the NumPy float64
+reference and against one update per launch, on dashcam-like video.
 """
 import ast
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cdnf_engine import Driver
 
 from cdnf_ti import CDNFParams, create_model
-from cdnf_ti.backends.cdnf import TaichiCDNFBackend
 from cdnf_ti.bench.inputs import standin_video
 from cdnf_ti.kernels.common import MAX_STEPS, LaunchRecord
 from cdnf_ti.reference import NumpyCDNFBackend
@@ -27,11 +26,10 @@ def _video(n: int) -> list[np.ndarray]:
     return [np.ascontiguousarray(f[::2, ::3][:, :70]) for f in standin_video(n, seed=3)]
 
 
-def _loaded_pair(params: CDNFParams, contrast_steps: int) -> tuple[TaichiCDNFBackend, NumpyCDNFBackend]:
-    """Generic Taichi backend (``contrast_steps`` updates per launch) and reference, two frames loaded."""
+def _loaded_pair(params: CDNFParams) -> tuple[Driver, NumpyCDNFBackend]:
+    """C-DNF on the pixel layout and the reference, two frames loaded."""
     f0, f1 = _video(2)
-    be, ref = TaichiCDNFBackend(params, f0.shape), NumpyCDNFBackend(params, f0.shape)
-    be.steps["c"] = contrast_steps
+    be, ref = Driver(params, f0.shape, fast=False), NumpyCDNFBackend(params, f0.shape)
     for b in (be, ref):
         b.load(f0, True)
         b.load(f1, False)
@@ -69,7 +67,7 @@ def test_a_launch_record_reports_only_the_updates_that_ran():
 
 def test_a_contrast_launch_stops_after_the_update_that_converges():
     p = CDNFParams(tol=1e-3)
-    be, ref = _loaded_pair(p, contrast_steps=8)
+    be, ref = _loaded_pair(p)
     coefs = ChebyshevSchedule(*p.chebyshev_bounds()[0]).take(8)
     expected = [ref.contrast_iterate(lam, mom) for lam, mom in coefs]
     count = _expected_count(expected, p.tol, RESTART_GROWTH)
@@ -77,7 +75,7 @@ def test_a_contrast_launch_stops_after_the_update_that_converges():
     got = be.contrast_iterate_many(coefs)
     assert len(got) == count
     assert np.allclose(got, expected[:count], atol=2e-6)
-    ref2 = _loaded_pair(p, 1)[1]
+    ref2 = _loaded_pair(p)[1]
     for lam, mom in coefs[:count]:
         ref2.contrast_iterate(lam, mom)
     for name in ("u_on", "u_off"):  # the launch left the fields of its last update
@@ -86,7 +84,7 @@ def test_a_contrast_launch_stops_after_the_update_that_converges():
 
 def test_a_contrast_launch_stops_after_a_growing_residual():
     p = CDNFParams()
-    be, ref = _loaded_pair(p, contrast_steps=8)
+    be, ref = _loaded_pair(p)
     coefs = [(3.0, 0.0)] * 8  # over-relaxed: the high spatial frequencies grow by about 2x per update
     expected = [ref.contrast_iterate(lam, mom) for lam, mom in coefs]
     count = _expected_count(expected, p.tol, RESTART_GROWTH)
@@ -96,24 +94,22 @@ def test_a_contrast_launch_stops_after_a_growing_residual():
     assert np.allclose(got, expected[:count], rtol=1e-5, atol=2e-6)
 
 
-def test_longer_solves_run_in_several_launches_of_the_backend_steps():
+def test_longer_solves_run_every_update_they_are_given():
     p = CDNFParams()
-    be, ref = _loaded_pair(p, contrast_steps=3)
-    coefs = ChebyshevSchedule(*p.chebyshev_bounds()[0]).take(7)  # launches of 3, 3 and 1 updates
+    be, ref = _loaded_pair(p)
+    coefs = ChebyshevSchedule(*p.chebyshev_bounds()[0]).take(7)
     expected = [ref.contrast_iterate(lam, mom) for lam, mom in coefs]
     assert _expected_count(expected, p.tol, RESTART_GROWTH) == 7
     got = be.contrast_iterate_many(coefs)
     assert len(got) == 7 and np.allclose(got, expected, atol=2e-6)
 
 
-def test_eight_contrast_updates_per_launch_compute_what_one_per_launch_computes():
+def test_eight_updates_per_solve_call_compute_what_one_per_call_computes():
     frames = _video(8)
     traces = []
     for steps in (1, 8):
-        model = create_model("cdnf")
-        model.fast = False  # the generic kernels, which GPUs run (8 contrast updates per launch there)
-        model.run(frames[:1])
-        model._be.steps["c"] = steps
+        model = create_model("cdnf", CDNFParams(steps_per_launch=steps))
+        model.fast = False  # the pixel layout, which GPUs run
         traces.append(model.run(frames))
     one, eight = traces
     assert np.array_equal(one.output, eight.output)  # same arithmetic, bit for bit
@@ -123,12 +119,7 @@ def test_eight_contrast_updates_per_launch_compute_what_one_per_launch_computes(
     assert np.max(np.abs(eight.output - ref.output)) < 1e-4 and eight.converged.all()
 
 
-def test_a_gpu_runs_eight_contrast_updates_per_launch_and_the_cpu_one():
-    assert TaichiCDNFBackend.launch_steps("cuda") == {"c": 8, "s": 1}
-    assert TaichiCDNFBackend.launch_steps("cpu") == {"c": 1, "s": 1}
-
-
-@pytest.mark.parametrize("module", ["cdnf", "lgmd", "engine", "stimuli", "common"])
+@pytest.mark.parametrize("module", ["lgmd", "engine", "stimuli", "common"])
 def test_no_kernel_returns_a_value(module):
     # A kernel's results go to an array argument: a returned vector costs ~210 us per launch on
     # the CPU under taichi 1.7.4, and a returned reduction 1-2 ms on a GPU

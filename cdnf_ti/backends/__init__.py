@@ -15,7 +15,7 @@ from __future__ import annotations
 from typing import Any, Callable
 
 from .. import taichi_runtime
-from . import cdnf, lplc2
+from . import lplc2
 from .engine import Backend
 
 #: Backend factories by model name: ``factory(model, shape, arch) -> backend``.
@@ -71,5 +71,4 @@ class Engine:
 ENGINE = Engine()
 
 
-register_backend("cdnf", cdnf.make_backend)
 register_backend("lplc2", lplc2.make_backend)

@@ -40,7 +40,7 @@ class Backend:
         ti = dsl()
         self.M = kernels(model.kernels)
         self.shape = H, W = tuple(int(s) for s in shape)
-        self.lane = getattr(model, "fast", True) and arch == "cpu" and W >= 2 * lanes()
+        self.lane = self.lane_layout(getattr(model, "fast", True), self.shape, arch)
         self.modes = engine.borders(self.M.planes, model.borders() if hasattr(model, "borders") else {})
         self.options = tuple(sorted(model.kernel_options().items())) if hasattr(model, "kernel_options") else ()
         n = self.M.planes.count
@@ -62,23 +62,46 @@ class Backend:
         self.frame: np.ndarray = np.zeros((H, W), np.float32)
         self.reset()
 
+    @staticmethod
+    def lane_layout(fast: bool, shape: tuple[int, int], arch: str) -> bool:
+        """Whether frames of ``shape`` (H, W) run on the lane layout: ``fast``, the CPU (the persistent workers
+        wait for each other on CPU threads) and at least two lane vectors wide."""
+        return bool(fast) and arch == "cpu" and shape[1] >= 2 * lanes()
+
     def reset(self) -> None:
-        """Every plane to 0, or to its declared initial value; the pairs' parity to 0."""
+        """Every plane to 0, or to its declared initial value; the pairs' parity to 0; every span pending."""
         self.x.fill(0.0)
         for name, coef in self.M.initial.items():
             plane = getattr(self.M.planes, name)
             value = float(self.coefs[getattr(self.M.coefs, coef).slot])
             self._fill(plane.slot, plane.slot + plane.buffers, value)
         self.parity = 0
+        self.turned = 0  # the pairs a solve's odd number of updates turned (bits, Plane.bit)
+        self.mark_all()
 
     def _fill(self, k0: int, k1: int, value: float) -> None:
         x = self.x.to_numpy()
         x[k0:k1] = value
         self.x.from_numpy(x)
 
+    def mark_all(self) -> None:
+        """Every element of every span group pending, both parities (after a change made outside the launches)."""
+        if not (self.lane and self.M.spans):
+            return
+        x = self.x.to_numpy()
+        e1 = kernels("common").lane_layout(self.shape[1])[0]
+        for group in self.M.spans:
+            x[group.store.slot, :, 0, :4] = (1, e1, 1, e1)
+        self.x.from_numpy(x)
+
     def flip(self) -> None:
         """Swap the buffers of every pair: ``now`` becomes ``before``."""
         self.parity = 1 - self.parity
+
+    @property
+    def mask(self) -> int:
+        """The parity of every pair, bit ``Plane.bit`` of it: the kernels' ``c``."""
+        return ((1 << self.M.planes.pairs) - 1 if self.parity else 0) ^ self.turned
 
     def load(self, grey: np.ndarray, first: bool) -> None:
         """Keep the frame (H, W; uint8, or float in [0, 1]) as the input of the next launches."""
@@ -96,7 +119,7 @@ class Backend:
                                               self.options)
 
     def _run(self, run: Any, record: LaunchRecord, *part: Any) -> None:
-        run(self.x, self.coef, self.fr, self.frame, self.parity, self.nw, self.out, record.array, *part)
+        run(self.x, self.coef, self.fr, self.frame, self.mask, self.nw, self.out, record.array, *part)
 
     def launch(self, name: str, **values: float) -> tuple[float, ...]:
         """Set the launch scalars ``values`` (by name; the others keep their last values), run the launch
@@ -128,7 +151,10 @@ class Backend:
             done = record.residuals(updates)
             if done and max(done[-1]) <= tol:  # the after stages' step: the updates run (as on the lane layout)
                 self._run(run, record, "after", len(done))
-        return record.residuals(updates), tuple(float(v) for v in self.out[:len(launch.results)])
+        residuals = record.residuals(updates)
+        if len(residuals) % 2:  # the pairs the updates alternate now hold their result in the other buffer
+            self.turned ^= sum(1 << b for b in launch.alternates)
+        return residuals, tuple(float(v) for v in self.out[:len(launch.results)])
 
     def fields(self) -> dict[str, np.ndarray]:
         """Every plane (a pair's ``now`` buffer) of the last frame, (H, W) each, by name; not the scratch
@@ -137,5 +163,5 @@ class Backend:
         if self.lane:
             n, (H, W) = lanes(), self.shape
             x = x.reshape(x.shape[0], H, -1)[:, :, n:n + W]
-        return {p.name: np.ascontiguousarray(x[p.slot + (self.parity if p.buffers == 2 else 0)])
+        return {p.name: np.ascontiguousarray(x[p.slot + ((self.mask >> p.bit) & 1 if p.buffers == 2 else 0)])
                 for p in self.M.planes if not p.name.startswith("_")}
