@@ -33,6 +33,9 @@ from .schedule import Plan
 
 #: Reductions of one launch, at most (the engine's float64 results, one set per process).
 MAX_RESULTS = 8
+#: The parts of a launch that a pixel-layout kernel runs, by index (its ``part`` argument: an int, which both
+#: compilers' template caches take; a string disables quadrants' cache).
+PARTS = ("all", "before", "update", "after")
 #: The lowest value a ``maxes`` result starts from.
 LOWEST = -3.0e38
 #: ``(EMPTY_LO, EMPTY_HI)``: an empty pending span (:class:`Span`).
@@ -834,9 +837,9 @@ def build(ti, lanes: int) -> SimpleNamespace:
         ``c``: the pairs' parity; ``nw``: workers (lane layout); ``out``: the results, float64; ``rec``: the
         launch record of a solve, :class:`~cdnf_ti.kernels.common.LaunchRecord`).
 
-        The pixel layout's kernel takes two more arguments, ``part`` (``"all"``, or ``"before"``, ``"update"``,
-        ``"after"``: the stages it runs) and ``step`` (the update): the backend runs a solve's updates one
-        launch each."""
+        The pixel layout's kernel takes two more arguments, ``part`` (the index in :data:`PARTS` of ``"all"``,
+        or ``"before"``, ``"update"``, ``"after"``: the stages it runs) and ``step`` (the update): the backend
+        runs a solve's updates one launch each."""
         spec = Layout(launch, lane, W, modes, options)
         spec.cell = _cell_class(spec)
         if lane:
@@ -860,10 +863,10 @@ def build(ti, lanes: int) -> SimpleNamespace:
         @ti.kernel
         def run_pixels(x: C.F3, coef: F1, fr: F1, frame: ti.types.ndarray(), c: ti.i32, nw: ti.i32, out: D1,
                        rec: F2, part: ti.template(), step: ti.i32):
-            if ti.static(part in ("all", "before")):
+            if ti.static(PARTS[part] in ("all", "before")):
                 _start(spec)
             for s in ti.static({"all": launch.before + launch.stages, "before": launch.before,
-                                "update": launch.update, "after": launch.stages}[part]):
+                                "update": launch.update, "after": launch.stages}[PARTS[part]]):
                 _pixel_stage(ti.static(Ctx(x, coef, fr, frame, c, nw, spec, rec)), s, step)
             _finish(spec, out)
 

@@ -2,7 +2,12 @@
 from __future__ import annotations
 
 import ast
+import warnings
 from pathlib import Path
+
+import numpy as np
+
+from cdnf_ti import create_model
 
 ROOT = Path(__file__).resolve().parent.parent
 KERNELS = sorted((ROOT / "kernels").glob("*.py"))
@@ -71,3 +76,14 @@ def test_no_kernel_or_func_is_called_with_more_than_twelve_parameters_counting_t
             "olgmd.py:photoreceptors", "olgmd.py:summation",
             "lplc2.py:lanes_arms"} <= set(widths)
     assert {k: v for k, v in widths.items() if v > 12} == {}
+
+
+def test_a_pixel_layout_launch_keeps_the_compilers_template_cache():
+    # a string template argument made quadrants warn "cannot create weak reference to 'str' object. Template
+    # mapper caching disabled" at every launch; the launch's part is an int
+    model = create_model("olgmd")
+    model.fast = False
+    frames = np.random.default_rng(0).integers(0, 256, (3, 24, 40), dtype=np.uint8)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        model.run(frames)

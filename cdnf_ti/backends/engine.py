@@ -119,6 +119,8 @@ class Backend:
                                               self.options)
 
     def _run(self, run: Any, record: LaunchRecord, *part: Any) -> None:
+        if part:  # the pixel layout: the part of the launch (its index in PARTS) and the update
+            part = (engine.PARTS.index(part[0]), part[1])
         run(self.x, self.coef, self.fr, self.frame, self.mask, self.nw, self.out, record.array, *part)
 
     def launch(self, name: str, **values: float) -> tuple[float, ...]:
