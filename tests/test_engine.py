@@ -70,5 +70,5 @@ def test_no_kernel_or_func_is_called_with_more_than_twelve_parameters_counting_t
     assert {"cdnf.py:lanes_contrast_solve", "cdnf.py:contrast_solve", "lgmd.py:flgmd_lanes_solve",
             "lgmd.py:lgmd1_lanes_layers", "sdnf.py:field", "engine.py:run_lanes", "engine.py:run_pixels",
             "olgmd.py:photoreceptors", "olgmd.py:summation",
-            "lplc2.py:lanes_arms"} <= set(widths)
+            "lplc2.py:arms"} <= set(widths)
     assert {k: v for k, v in widths.items() if v > 12} == {}

@@ -15,7 +15,7 @@ from __future__ import annotations
 from typing import Any, Callable
 
 from .. import taichi_runtime
-from . import cdnf, lgmd, lplc2
+from . import cdnf, lgmd
 from .engine import Backend
 
 #: Backend factories by model name: ``factory(model, shape, arch) -> backend``.
@@ -74,4 +74,3 @@ ENGINE = Engine()
 register_backend("cdnf", cdnf.make_backend)
 for _name in lgmd.FAMILY:
     register_backend(_name, lgmd.make_backend)
-register_backend("lplc2", lplc2.make_backend)
