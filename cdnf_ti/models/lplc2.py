@@ -193,12 +193,17 @@ class LPLC2(Model):
         self.active_prev: int | None = None
 
     def _step(self, t: int, grey: np.ndarray, loaded: None) -> StepResult:
+        engine = not isinstance(self._be, NumpyLPLC2Backend)  # the reference loaded the frame already
         scale = dict(denom=255.0 if grey.dtype == np.uint8 else 1.0)
         if t == 0:
-            self._be.launch("store", **scale)
+            if engine:
+                self._be.launch("store", **scale)
             return StepResult(t, self.v, False, True, self._diagnostics(0, 0, 0.0, 0.0, (0.0,) * 4, self.v))
-        active, core, *arms = self._be.launch("frame", **scale)
-        active = int(round(active))
+        if engine:
+            active, core, *arms = self._be.launch("frame", **scale)
+            active = int(round(active))
+        else:
+            active, core, arms = self._be.pool()
         current = self._gf_input(active)
         self.active_prev = active
         self.v, spikes, v_peak = gf_frame(self.v, current, 1.0 / self.fps, self.params)
