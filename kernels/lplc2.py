@@ -91,76 +91,85 @@ def build(ti, lanes: int) -> SimpleNamespace:
         a.put(HOR, (left - right) * inside)
         a.put(VER, (up - down) * inside)
 
-    @ti.func
-    def window(a: ti.template(), plane: ti.template(), k0: ti.template(), k1: ti.template(), along: ti.template()):
-        """``sum_{k=k0..k1} plane`` at row (``along`` 0) or column (1) offsets ``k``, as float32: summed in float64
-        on the pixel layout, in float32 on the lane layout (whose vectors the compilers do not widen)."""
-        s = a.zeros()
-        if ti.static(a.lane):
-            for run in ti.static(runs(k0, k1)):
-                for k in ti.static(run):
-                    s += a.at(plane, k * (1 - along), k * along)
-        else:
-            s64 = ti.f64(0.0)
-            for run in ti.static(runs(k0, k1)):
-                for k in ti.static(run):
-                    s64 += ti.cast(a.at(plane, k * (1 - along), k * along), ti.f64)
-            s = ti.cast(s64, ti.f32)
-        return s
+    def sums_along(along: int):
+        """The window sums along columns (``along`` 0: row offsets) or rows (1: column offsets): ``window(a, plane,
+        offsets)``, ``run_window(a, plane, offsets)`` (``offsets``: a range of offsets ``k0 .. k1``)."""
 
-    @ti.func
-    def run_window(a: ti.template(), plane: ti.template(), k0: ti.template(), k1: ti.template(), along: ti.template()):
-        """:func:`window`; on the lane layout from whole runs of :data:`RUN` lines (:func:`runs_of`) and the lines
-        left over: runs ending at or before the cell for offsets <= 0, runs starting after it for offsets > 0 (a
-        run read outside the frame then lies wholly outside it: 0, as its zero border gives)."""
-        s = a.zeros()
-        if ti.static(a.lane):
-            end, start = ti.static(RUNS_OF[plane.name])
-            if ti.static(k0 <= 0):
-                lo = ti.static(min(k1, 0))
-                whole = ti.static((lo - k0 + 1) // RUN)
-                for q in ti.static(range(whole)):
-                    s += a.at(end, (lo - q * RUN) * (1 - along), (lo - q * RUN) * along)
-                for k in ti.static(range(k0, lo - whole * RUN + 1)):
-                    s += a.at(plane, k * (1 - along), k * along)
-            if ti.static(k1 > 0):
-                hi = ti.static(max(k0, 1))
-                whole = ti.static((k1 - hi + 1) // RUN)
-                for q in ti.static(range(whole)):
-                    s += a.at(start, (hi + q * RUN) * (1 - along), (hi + q * RUN) * along)
-                for k in ti.static(range(hi + whole * RUN, k1 + 1)):
-                    s += a.at(plane, k * (1 - along), k * along)
-        else:
-            s = window(a, plane, k0, k1, along)
-        return s
+        @ti.func
+        def window(a: ti.template(), plane: ti.template(), offsets: ti.template()):
+            """``sum_k plane`` at the ``offsets`` as float32: summed in float64 on the pixel layout, in float32 on
+            the lane layout (whose vectors the compilers do not widen)."""
+            s = a.zeros()
+            if ti.static(a.lane):
+                for run in ti.static(runs(offsets.start, offsets.stop - 1)):
+                    for k in ti.static(run):
+                        s += a.at(plane, k * (1 - along), k * along)
+            else:
+                s64 = ti.f64(0.0)
+                for run in ti.static(runs(offsets.start, offsets.stop - 1)):
+                    for k in ti.static(run):
+                        s64 += ti.cast(a.at(plane, k * (1 - along), k * along), ti.f64)
+                s = ti.cast(s64, ti.f32)
+            return s
 
-    @ti.func
-    def runs_of(a: ti.template(), planes: ti.template(), along: ti.template()):
-        """The lane layout's sums of :data:`RUN` lines ending here and starting here, of each of ``planes``."""
-        if ti.static(a.lane):
-            for plane in ti.static(planes):
+        @ti.func
+        def run_window(a: ti.template(), plane: ti.template(), offsets: ti.template()):
+            """``window``; on the lane layout from whole runs of :data:`RUN` lines (:func:`runs_of`) and the lines
+            left over: runs ending at or before the cell for offsets <= 0, runs starting after it for offsets > 0
+            (a run read outside the frame then lies wholly outside it: 0, as its zero border gives)."""
+            s = a.zeros()
+            k0, k1 = ti.static(offsets.start, offsets.stop - 1)
+            if ti.static(a.lane):
                 end, start = ti.static(RUNS_OF[plane.name])
-                a.put(end, window(a, plane, 1 - RUN, 0, along))
-                a.put(start, window(a, plane, 0, RUN - 1, along))
+                if ti.static(k0 <= 0):
+                    lo = ti.static(min(k1, 0))
+                    whole = ti.static((lo - k0 + 1) // RUN)
+                    for q in ti.static(range(whole)):
+                        s += a.at(end, (lo - q * RUN) * (1 - along), (lo - q * RUN) * along)
+                    for k in ti.static(range(k0, lo - whole * RUN + 1)):
+                        s += a.at(plane, k * (1 - along), k * along)
+                if ti.static(k1 > 0):
+                    hi = ti.static(max(k0, 1))
+                    whole = ti.static((k1 - hi + 1) // RUN)
+                    for q in ti.static(range(whole)):
+                        s += a.at(start, (hi + q * RUN) * (1 - along), (hi + q * RUN) * along)
+                    for k in ti.static(range(hi + whole * RUN, k1 + 1)):
+                        s += a.at(plane, k * (1 - along), k * along)
+            else:
+                s = window(a, plane, offsets)
+            return s
+
+        return window, run_window
+
+    (column_window, column_run_window), (row_window, row_run_window) = sums_along(0), sums_along(1)
+    ending, starting = range(1 - RUN, 1), range(0, RUN)  # the runs' offsets
 
     @ti.func
     def column_runs(a: ti.template()):
-        """The runs of the motion maps, along columns."""
-        runs_of(a, (HOR, VER), 0)
+        """The lane layout's sums of :data:`RUN` rows ending here and starting here, of the motion maps."""
+        if ti.static(a.lane):
+            for plane in ti.static((HOR, VER)):
+                end, start = ti.static(RUNS_OF[plane.name])
+                a.put(end, column_window(a, plane, ending))
+                a.put(start, column_window(a, plane, starting))
 
     @ti.func
     def row_runs(a: ti.template()):
-        """The runs of the column passes, along rows."""
-        runs_of(a, (H_BAND, UP_COLS, DOWN_COLS), 1)
+        """The lane layout's sums of :data:`RUN` columns ending here and starting here, of the column passes."""
+        if ti.static(a.lane):
+            for plane in ti.static((H_BAND, UP_COLS, DOWN_COLS)):
+                end, start = ti.static(RUNS_OF[plane.name])
+                a.put(end, row_window(a, plane, ending))
+                a.put(start, row_window(a, plane, starting))
 
     @ti.func
     def columns(a: ti.template()):
         """The column passes: ``horizontal`` over the band rows, ``vertical`` over the half-fields above
         (up) and below (down, negated)."""
         half, before, after = ti.static(a.option("half"), a.option("before"), a.option("after"))
-        a.put(H_BAND, run_window(a, HOR, -before, after, 0))
-        a.put(UP_COLS, run_window(a, VER, 1 - half, 0, 0))
-        a.put(DOWN_COLS, 0.0 - run_window(a, VER, 1, half, 0))
+        a.put(H_BAND, column_run_window(a, HOR, range(-before, after + 1)))
+        a.put(UP_COLS, column_run_window(a, VER, range(1 - half, 1)))
+        a.put(DOWN_COLS, 0.0 - column_run_window(a, VER, range(1, half + 1)))
 
     @ti.func
     def kept(arm, threshold):
@@ -172,10 +181,10 @@ def build(ti, lanes: int) -> SimpleNamespace:
         """The row passes: the four thresholded arms and their product; returns (unit active, centre response)."""
         half, before, after = ti.static(a.option("half"), a.option("before"), a.option("after"))
         thr, inside = a.coef(K.arm_t), grid(a)
-        left = kept(run_window(a, H_BAND, 1 - half, 0, 1), thr)
-        right = kept(0.0 - run_window(a, H_BAND, 1, half, 1), thr)
-        up = kept(run_window(a, UP_COLS, -before, after, 1), thr)
-        down = kept(run_window(a, DOWN_COLS, -before, after, 1), thr)
+        left = kept(row_run_window(a, H_BAND, range(1 - half, 1)), thr)
+        right = kept(0.0 - row_run_window(a, H_BAND, range(1, half + 1)), thr)
+        up = kept(row_run_window(a, UP_COLS, range(-before, after + 1)), thr)
+        down = kept(row_run_window(a, DOWN_COLS, range(-before, after + 1)), thr)
         p = left * right * up * down * inside
         a.put(LEFT, left * inside)
         a.put(RIGHT, right * inside)
