@@ -381,7 +381,7 @@ class NumpyLPLC2Backend:
         return int(np.count_nonzero(ref.lplc2 > 0)), float(ref.lplc2[cy, cx]), arms
 
     def fields(self) -> dict[str, np.ndarray]:
-        """The maps of :class:`~cdnf_ti.backends.lplc2.TaichiLPLC2Backend`, padded to (H, W) with zeros."""
+        """The maps of the compiled model's :meth:`fields` (its unit grid), padded to (H, W) with zeros."""
         ref = self.ref
         m = ref.motion_maps
         maps = dict(horizontal=m[0] - m[1], vertical=m[2] - m[3], left=ref.arm_maps[0], right=ref.arm_maps[1],

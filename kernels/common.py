@@ -158,6 +158,12 @@ class LaunchRecord:
 
 
 
+def unrolled_runs(n: int, run: int = 32) -> list[range]:
+    """``1 .. n`` in ranges of at most ``run``: nested ``ti.static`` loops (the compilers warn on unrolling more
+    than 32 iterations in one loop)."""
+    return [range(d, min(d + run, n + 1)) for d in range(1, n + 1, run)]
+
+
 def layout(width: int, lanes: int) -> tuple[int, int]:
     """``(E1, NB)`` of a lane array for frames ``width`` px wide: last element holding a frame
     column, elements per row (``lanes`` columns per element, a ghost element either side)."""
@@ -391,27 +397,37 @@ def build(ti, lanes: int) -> SimpleNamespace:
     def fill_ghosts(x: ti.template(), p, i, left: ti.i32, right: ti.i32, W: ti.template(), R: ti.template(),
                     mode: ti.template()):
         """Write the R ghost columns left of column 0 / right of column W-1 of row ``i`` of buffer ``p``
-        (``p`` is ignored for a field of one buffer, see :func:`lane_get`)."""
+        (``p`` is ignored for a field of one buffer, see :func:`lane_get`); one ghost element either side."""
+        fill_lane_ghosts(x, p, i, left, right, W, R, mode, 1)
+
+
+    @ti.func
+    def fill_lane_ghosts(x: ti.template(), p, i, left: ti.i32, right: ti.i32, W: ti.template(), R: ti.template(),
+                         mode: ti.template(), G: ti.template()):
+        """:func:`fill_ghosts` for a row with ``G`` ghost elements either side (column ``c`` at flat position
+        ``G LANES + c``), ``R <= G LANES`` columns each side."""
         if left:
-            for d in ti.static(range(1, R + 1)):
-                g = LANES - d  # flat position of column -d
-                val = ti.f32(0.0)
-                if ti.static(mode == REFLECT):
-                    val = lane_get(x, p, i, (LANES + d) // LANES)[(LANES + d) % LANES]
-                elif ti.static(mode == REPLICATE):
-                    val = lane_get(x, p, i, 1)[0]
-                _lane_put(x, p, i, g // LANES, g % LANES, val)
+            for run in ti.static(unrolled_runs(R)):
+                for d in ti.static(run):
+                    g = G * LANES - d  # flat position of column -d
+                    val = ti.f32(0.0)
+                    if ti.static(mode == REFLECT):
+                        val = lane_get(x, p, i, (G * LANES + d) // LANES)[(G * LANES + d) % LANES]
+                    elif ti.static(mode == REPLICATE):
+                        val = lane_get(x, p, i, G)[0]
+                    _lane_put(x, p, i, g // LANES, g % LANES, val)
         if right:
-            for d in ti.static(range(1, R + 1)):
-                g = LANES + W - 1 + d
-                val = ti.f32(0.0)
-                if ti.static(mode == REFLECT):
-                    s = LANES + W - 1 - d
-                    val = lane_get(x, p, i, s // LANES)[s % LANES]
-                elif ti.static(mode == REPLICATE):
-                    s = LANES + W - 1
-                    val = lane_get(x, p, i, s // LANES)[s % LANES]
-                _lane_put(x, p, i, g // LANES, g % LANES, val)
+            for run in ti.static(unrolled_runs(R)):
+                for d in ti.static(run):
+                    g = G * LANES + W - 1 + d
+                    val = ti.f32(0.0)
+                    if ti.static(mode == REFLECT):
+                        s = G * LANES + W - 1 - d
+                        val = lane_get(x, p, i, s // LANES)[s % LANES]
+                    elif ti.static(mode == REPLICATE):
+                        s = G * LANES + W - 1
+                        val = lane_get(x, p, i, s // LANES)[s % LANES]
+                    _lane_put(x, p, i, g // LANES, g % LANES, val)
 
 
     @ti.func

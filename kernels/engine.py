@@ -236,8 +236,9 @@ class Layout:
     of every plane (``modes``: slot -> (mode, ring)), the model's compile-time options (``options``:
     ``(name, value)`` pairs, e.g. a stencil's radius), the launch."""
 
-    def __init__(self, launch: Launch, lane: bool, W: int, modes: tuple, options: tuple = ()):
+    def __init__(self, launch: Launch, lane: bool, W: int, modes: tuple, options: tuple = (), ghosts: int = 1):
         self.launch, self.lane, self.W, self.modes, self.options = launch, lane, W, dict(modes), dict(options)
+        self.ghosts = ghosts  # the lane arrays' ghost elements either side (:func:`ghost_elements`)
 
     def halo(self, stage: "Stage") -> int:
         """The ghost columns ``stage`` refreshes: its ``halo``, a number or the name of an option."""
@@ -253,6 +254,14 @@ class Layout:
 
     def border(self, plane: Plane) -> tuple[int, bool]:
         return self.modes.get(plane.slot, (REPLICATE, False))
+
+
+def ghost_elements(launches, options: dict, lanes: int) -> int:
+    """The ghost elements either side of a lane row for ``launches``: enough for the widest ``halo`` of their
+    stages (a number or an option's name, in ``options``), at least 1: ``ceil(max halo / lanes)``."""
+    halos = [options[s.halo] if isinstance(s.halo, str) else s.halo
+             for launch in launches for s in launch.before + launch.update + launch.stages]
+    return max(1, -(-max(halos, default=1) // lanes))
 
 
 def borders(planes: Planes, spec: dict) -> tuple:
@@ -308,15 +317,21 @@ def build(ti, lanes: int) -> SimpleNamespace:
             im, ip = ti.select(i == 0, 1, i - 1), ti.select(i == H - 1, H - 2, i + 1)
         return im, ip
 
-    # -- the lane layout: element (k, i, e) holds the columns (e - 1) LANES .. e LANES - 1 of row i -------
+    # -- the lane layout: element (k, i, e) holds the columns (e - G) LANES .. (e - G + 1) LANES - 1 of row i,
+    # G ghost elements either side (Layout.ghosts) ------------------------------------------------------
     @ti.func
     def _lane_at(x: ti.template(), k, i, e, mode: ti.template(), di: ti.template(), dj: ti.template()):
         r = i
         if ti.static(di != 0):
             r = C.border_index(i + di, x.shape[1], mode)
         v = x[k, r, e]
-        if ti.static(dj != 0):
+        if ti.static(dj != 0 and -LANES < dj < LANES):
             v = C.lane_shift(x[k, r, e - 1], x[k, r, e], x[k, r, e + 1], dj)
+        elif ti.static(dj != 0):  # a wide offset: element e + q, shifted by the rest
+            q = ti.static(dj // LANES)
+            v = x[k, r, e + q]
+            if ti.static(dj - q * LANES != 0):
+                v = C.lane_shift(x[k, r, e + q - 1], x[k, r, e + q], x[k, r, e + q + 1], dj - q * LANES)
         if ti.static(mode == ZERO and di != 0):
             v = v * C.border_weight(i + di, x.shape[1], mode)
         return v
@@ -341,27 +356,33 @@ def build(ti, lanes: int) -> SimpleNamespace:
         return k0 * c_cur + k1 * (left + right)
 
     @ti.func
-    def _lane_put(x: ti.template(), k, i, e, v, ring: ti.template(), W: ti.template()):
+    def _lane_put(x: ti.template(), k, i, e, v, ring: ti.template(), spec: ti.template()):
         if ti.static(ring):
-            v = v * _lane_inside(i, e, x.shape[1], W)
+            v = v * _lane_within(i, e, 1, x.shape[1] - 1, 1, spec.W - 1, spec.ghosts)
         x[k, i, e] = v
 
     @ti.func
-    def _lane_inside(i, e, H, W: ti.template()):
-        """1.0 on the lanes of element ``(i, e)`` off the frame's outermost ring, else 0.0."""
+    def _lane_within(i, e, r0, r1, c0, c1, G: ti.template()):
+        """1.0 on the lanes of element ``(i, e)`` in rows [r0, r1) and columns [c0, c1), else 0.0."""
         m = ti.Vector([0.0] * LANES, dt=ti.f32)
-        row = (i > 0) & (i < H - 1)
+        row = (i >= r0) & (i < r1)
         for q in ti.static(range(LANES)):
-            col = (e - 1) * LANES + q
-            m[q] = ti.select(row & (col >= 1) & (col <= W - 2), 1.0, 0.0)
+            col = (e - G) * LANES + q
+            m[q] = ti.select(row & (col >= c0) & (col < c1), 1.0, 0.0)
         return m
 
     @ti.func
-    def _lane_input(frame: ti.template(), i, e, plane: ti.template(), W: ti.template()):
+    def _pixel_within(i, j, r0, r1, c0, c1):
+        return ti.select((i >= r0) & (i < r1) & (j >= c0) & (j < c1), 1.0, 0.0)
+
+    @ti.func
+    def _lane_input(frame: ti.template(), i, e, plane: ti.template(), spec: ti.template()):
         """The input's columns of element ``(i, e)`` (plane ``plane`` of an event bin; past W - 1: the last)."""
+        W = ti.static(spec.W)
+        G = ti.static(spec.ghosts)
         g = ti.Vector([0.0] * LANES, dt=ti.f32)
         for q in ti.static(range(LANES)):
-            jj = ti.min((e - 1) * LANES + q, W - 1)
+            jj = ti.min((e - G) * LANES + q, W - 1)
             if ti.static(len(frame.shape) == 3):
                 g[q] = ti.cast(frame[plane, i, jj], ti.f32)
             else:
@@ -520,14 +541,14 @@ def build(ti, lanes: int) -> SimpleNamespace:
         @_dsl
         def frame_mask(self):
             """1.0 on the cell's frame columns, 0.0 on a lane past the frame's last column."""
-            return C.lane_mask(self.j, self.spec.W) if self.lane else 1.0
+            return C.lane_mask(self.j - (self.spec.ghosts - 1), self.spec.W) if self.lane else 1.0
 
         @_dsl
         def put(self, plane, value):
             """Write ``value`` to ``plane`` here (0 on the outermost ring of a plane with the zero ring)."""
             ring = self.spec.border(plane)[1]
             if self.lane:
-                _lane_put(self.x, self._k(plane), self.i, self.j, value, ring, self.spec.W)
+                _lane_put(self.x, self._k(plane), self.i, self.j, value, ring, self.spec)
             else:
                 _pixel_put(self.x, self._k(plane), self.i, self.j, value, ring)
 
@@ -555,8 +576,16 @@ def build(ti, lanes: int) -> SimpleNamespace:
         def event(self, polarity: int):
             """Plane ``polarity`` (0: ON, 1: OFF) of an event bin here."""
             if self.lane:
-                return _lane_input(self.frame, self.i, self.j, polarity, self.spec.W)
+                return _lane_input(self.frame, self.i, self.j, polarity, self.spec)
             return _pixel_input(self.frame, self.i, self.j, polarity)
+
+        @_dsl
+        def within(self, r0, r1, c0, c1):
+            """1.0 where the cell's row is in [r0, r1) and its column in [c0, c1) (frame coordinates), else 0.0
+            (per lane on the lane layout): a mask of a part of the frame."""
+            if self.lane:
+                return _lane_within(self.i, self.j, r0, r1, c0, c1, self.spec.ghosts)
+            return _pixel_within(self.i, self.j, r0, r1, c0, c1)
 
         @_dsl
         def record(self, k: int):
@@ -586,6 +615,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
     # -- the row iterator: a stage on rows [i0, i1), reduced -----------------------------------------
     @ti.func
     def _reduce_lane(v, e, W: ti.template(), kind: ti.template()):
+        """The reduction of lane vector ``v`` of element ``e`` (counted from 1: the lanes past ``W`` masked)."""
         r = ti.f64(0.0)
         if ti.static(kind == "max"):
             r = ti.cast(run_max(v * C.lane_mask(e, W), LANES), ti.f64)
@@ -614,29 +644,31 @@ def build(ti, lanes: int) -> SimpleNamespace:
         @ti.func
         def run(ctx: ti.template(), i0, i1, j):
             W = ti.static(ctx.spec.W)
+            G = ti.static(ctx.spec.ghosts)
             start = ti.static(0.0 if kind == "sum" else LOWEST)
             a0, a1 = ti.f64(start), ti.f64(start)
             m0, m1 = _lane_zeros(), _lane_zeros()  # an update's residuals, maxed as vectors, reduced once
             p0 = _read(res, 0)  # the earlier stages' first result, final in this phase
             for i in range(i0, i1):
-                for e in range(1, (LANES + W - 1) // LANES + 1):
+                for e in range(G, (LANES + W - 1) // LANES + G):
+                    e1 = e - G + 1  # the element counted from 1 (lane_mask)
                     if ti.static(stage.residuals == 1):
-                        m0 = ti.max(m0, stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j)) * C.lane_mask(e, W))
+                        m0 = ti.max(m0, stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j)) * C.lane_mask(e1, W))
                     elif ti.static(stage.residuals == 2):
                         q0, q1 = stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j))
-                        m0 = ti.max(m0, q0 * C.lane_mask(e, W))
-                        m1 = ti.max(m1, q1 * C.lane_mask(e, W))
+                        m0 = ti.max(m0, q0 * C.lane_mask(e1, W))
+                        m1 = ti.max(m1, q1 * C.lane_mask(e1, W))
                     elif ti.static(n == 0):
                         stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j))
                     elif ti.static(n == 1):
-                        a0 = _combine(a0, _reduce_lane(stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j)), e, W, kind), kind)
+                        a0 = _combine(a0, _reduce_lane(stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j)), e1, W, kind), kind)
                     else:
                         r0, r1 = stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j))
-                        a0 = _combine(a0, _reduce_lane(r0, e, W, kind), kind)
-                        a1 = _combine(a1, _reduce_lane(r1, e, W, kind), kind)
+                        a0 = _combine(a0, _reduce_lane(r0, e1, W, kind), kind)
+                        a1 = _combine(a1, _reduce_lane(r1, e1, W, kind), kind)
                 for g in ti.static(stage.ghosts):
-                    C.fill_ghosts(ctx.x, _index(ctx.c, g, _turn(ctx.spec, g, j)), i, 1, 1, W,
-                                  ti.static(ctx.spec.halo(stage)), ti.static(ctx.spec.border(g)[0]))
+                    C.fill_lane_ghosts(ctx.x, _index(ctx.c, g, _turn(ctx.spec, g, j)), i, 1, 1, W,
+                                       ti.static(ctx.spec.halo(stage)), ti.static(ctx.spec.border(g)[0]), G)
             if ti.static(stage.residuals >= 1):
                 ti.atomic_max(sched.rbuf[j, 0], run_max(m0, LANES))
             if ti.static(stage.residuals == 2):
@@ -691,7 +723,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
         moved = 0
         if ti.static(a.lane):
             tau = _read(a.fr, ti.static(a.spec.launch.tau))
-            ad = C.lane_abs(d) * C.lane_mask(a.j, a.spec.W)
+            ad = C.lane_abs(d) * C.lane_mask(a.j - ti.static(a.spec.ghosts - 1), a.spec.W)
             a.x[k_prev, a.i, a.j] = ti.select(ad > tau, nx, u)
             moved = ti.select(run_max(ad, LANES) > tau, 1, 0)
         else:
@@ -831,7 +863,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
             sched.residuals_to(rec, spec.launch.fields)
 
     @functools.lru_cache(maxsize=None)
-    def kernel(launch: Launch, lane: bool, W: int, modes: tuple, options: tuple = ()):
+    def kernel(launch: Launch, lane: bool, W: int, modes: tuple, options: tuple = (), ghosts: int = 1):
         """The kernel of ``launch`` for one layout: ``run(x, coef, fr, frame, c, nw, out, rec)`` (``x``: the
         stacked planes, lane array or (planes, H, W); ``frame``: the input, (H, W) or an event bin (2, H, W);
         ``c``: the pairs' parity; ``nw``: workers (lane layout); ``out``: the results, float64; ``rec``: the
@@ -840,7 +872,9 @@ def build(ti, lanes: int) -> SimpleNamespace:
         The pixel layout's kernel takes two more arguments, ``part`` (the index in :data:`PARTS` of ``"all"``,
         or ``"before"``, ``"update"``, ``"after"``: the stages it runs) and ``step`` (the update): the backend
         runs a solve's updates one launch each."""
-        spec = Layout(launch, lane, W, modes, options)
+        spec = Layout(launch, lane, W, modes, options, ghosts)
+        if lane and ghosts != 1 and any(s.visits for s in launch.before + launch.update + launch.stages):
+            raise ValueError(f"{launch.name}: pending spans take one ghost element either side (halo < lanes)")
         spec.cell = _cell_class(spec)
         if lane:
             def row(s):

@@ -1,263 +1,220 @@
-"""Taichi kernels of EMD-LPLC2 (Zhao et al. 2023): elementary motion detectors and the LPLC2 array.
+"""EMD-LPLC2's stages (Zhao et al. 2023): elementary motion detectors and the LPLC2 array (float32 planes).
 
-Per frame (float32 state):
+Two launches, run by the engine (:mod:`cdnf_ti.kernels.engine`) in either layout:
 
-* :func:`emd_step` (one launch): photoreceptor high-pass ``F_h``, ON/OFF rectification, delay low-pass
-  ``F_d`` per pixel, then the opponent motion of every detector pair on the (H-1, W-1) grid:
-  ``horizontal = leftward - rightward``, ``vertical = upward - downward`` (ON and OFF summed);
-* :func:`lplc2_columns` and :func:`lplc2_arms` (two launches): the four radial-opponent half-plane arms of every
-  LPLC2 unit as separable window sums (:mod:`cdnf_ti.kernels.pooling`), each kept where it
-  exceeds the arm threshold, their product (the unit's response), the active-unit count and
-  the centre unit's arms.
+1. ``store`` (the first frame): luminance ``L = frame / denom``.
+2. ``frame`` (every later one):
 
-Two paths compute the same equations: the generic kernels on (H, W) arrays (every arch; the
-pooling's running sums in float64) and the ``lanes_*`` kernels on lane arrays (the fast CPU path,
-explicit vector types; :mod:`cdnf_ti.kernels.pooling`'s lane layout with ``G`` ghost elements either
-side, ``coef[GHOSTS]``).
+   * ``filters``: ``F_h = b (L - L(t-1)) + b F_h(t-1)``, ``ON = [F_h - on_t]^+``, ``OFF = [off_t - F_h]^+``,
+     ``F_d = a X + (1 - a) F_d(t-1)`` for X = ON, OFF;
+   * ``motion``: the opponent motion of every detector pair on the (H-1, W-1) grid (ON and OFF summed):
+     ``horizontal = leftward - rightward``, ``vertical = upward - downward`` (0 on the last row and column);
+   * ``columns``, ``arms``: the four radial-opponent half-plane arms of every unit as separable window sums
+     (a column pass, then a row pass; zero outside the grid, summed in float64), each kept where
+     ``> arm_t``, and ``lplc2`` their product; results ``active`` (units > 0) and ``core`` (the centre
+     unit's response), then the centre unit's four arms (``centre_lr``, ``centre_ud``).
 
-The giant fibre (a scalar LIF) is the model's (:class:`cdnf_ti.models.lplc2.LPLC2`). The float64
-oracle: :class:`cdnf_ti.lplc2_reference.LPLC2Reference`.
-
-Coefficients travel in one float64 array ``coef`` (:data:`COEF`), filled by the backend.
+The window geometry (``half``, ``before``, ``after``) is compile-time (the model's ``kernel_options()``); the row
+pass reads up to ``reach`` columns either side (the engine's wide ghosts). The giant fibre is the model's
+(:class:`cdnf_ti.models.lplc2.LPLC2`). The float64 oracle: :class:`cdnf_ti.lplc2_reference.LPLC2Reference`.
 """
 
 import functools
 from types import SimpleNamespace
 
-from ..taichi_runtime import vector_kernel
-from . import common, pooling
-from .common import namespace
+from . import engine
+from .engine import Coefs, Launch, Planes, Scalars, Stage
 
-#: Slots of the coefficient array: high-pass b, low-pass a, ON and OFF thresholds, arm threshold,
-#: receptive-field half side, band before/after the centre, the centre unit (row, column), the lane
-#: arrays' ghost elements either side, the unit grid's columns (W - 1).
-COEF = ("b_high", "a_low", "on_threshold", "off_threshold", "arm_threshold", "half_side", "band_before",
-        "band_after", "core_row", "core_col", "ghosts", "grid_cols")
-B_HIGH, A_LOW, ON_T, OFF_T, ARM_T, HALF, BEFORE, AFTER, CORE_R, CORE_C, GHOSTS, GRID_COLS = range(len(COEF))
-#: The lane kernels' stacked maps: the column passes (``bands``), their in-element prefixes, and the
-#: thresholded arms with the units' responses (``maps``).
-BANDS = ("h_band", "up_cols", "down_cols")
-MAPS = ("left", "right", "up", "down", "lplc2")
-#: Slots of a pooling launch's results ``out``: active units, the centre unit's response and its four arms.
-OUT = ("active", "core", "left", "right", "up", "down")
+# "_": scratch, not among the fields: luminance, high-pass, delayed ON / OFF, the column passes
+PLANES = Planes("_L _Fh _Fon _Foff horizontal vertical _h_band _up_cols _down_cols left right up down lplc2 "
+                "_hor_end _hor_start _ver_end _ver_start _h_end _h_start _up_end _up_start _down_end _down_start")
+#: High-pass ``b``, low-pass ``a``, ON / OFF thresholds, arm threshold; the grid (rows, columns) and its centre unit.
+COEFS = Coefs(b_high=1, a_low=1, on_t=1, off_t=1, arm_t=1, grid=2, core=2)
+#: The frame's grey scale: ``L = frame / denom``.
+SCALARS = Scalars("denom")
+(L, FH, FD_ON, FD_OFF, HOR, VER, H_BAND, UP_COLS, DOWN_COLS, LEFT, RIGHT, UP, DOWN, LPLC2, *RUNS) = PLANES
+#: The lane layout's runs of each window's plane: (the sums of RUN lines ending here, starting here).
+RUNS_OF = {plane.name: (RUNS[2 * k], RUNS[2 * k + 1]) for k, plane in enumerate((HOR, VER, H_BAND, UP_COLS, DOWN_COLS))}
+#: Rows or columns per run of the lane layout's passes: a window is whole runs (their sums) and single lines.
+RUN = 8
+K, V = COEFS, SCALARS
+
+
+def runs(k0: int, k1: int) -> list[range]:
+    """``k0 .. k1`` in ranges of at most 32 (nested ``ti.static`` loops: the compilers warn on longer ones)."""
+    return [range(k, min(k + 32, k1 + 1)) for k in range(k0, k1 + 1, 32)]
 
 
 @functools.lru_cache(maxsize=None)
 def build(ti, lanes: int) -> SimpleNamespace:
-    """The kernels of this module for the DSL module ``ti`` (taichi or quadrants) and ``lanes`` float32
-    columns per lane vector of the fast path: a namespace of every name below (and the module-level
-    constants). Built once per (compiler, lanes), after the runtime started."""
-    LANES = lanes
-    C = common.build(ti, lanes)
-    LANE2, LANE3 = C.LANE2, C.LANE3
-    P = pooling.build(ti, lanes)
-    column_window, row_window = P.column_window, P.row_window
-    lane_column_block, lane_prefix, lane_window = P.lane_column_block, P.lane_prefix, P.lane_window
-
-    F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
-    D1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
+    """EMD-LPLC2's launches for the DSL module ``ti``: the stages below, bound to the engine."""
 
     @ti.func
     def on_off(f_h, on_t, off_t):
-        """ON ``= [F_h - on_t]^+`` and OFF ``= [off_t - F_h]^+`` of a high-passed signal (scalar or lane vector)."""
+        """ON ``= [F_h - on_t]^+`` and OFF ``= [off_t - F_h]^+``."""
         return ti.max(f_h - on_t, 0.0), ti.max(off_t - f_h, 0.0)
 
     @ti.func
-    def temporal_filters(f_h, fd_on, fd_off, lum, lum_prev, b, a, on_t, off_t):
-        """One frame of a pixel's filters: ``F_h = b (L - L_prev) + b F_h``, then ``F_d = a X + (1 - a) F_d``
-        for X = ON, OFF. Returns the new ``(F_h, F_d_on, F_d_off)``."""
-        h = b * (lum - lum_prev) + b * f_h
-        on, off = on_off(h, on_t, off_t)
-        return h, a * on + (1.0 - a) * fd_on, a * off + (1.0 - a) * fd_off
+    def store(a: ti.template()):
+        """The first frame: ``L`` only."""
+        a.put(L, a.grey() / a.value(V.denom))
 
     @ti.func
-    def opponent_motion(f_h: ti.template(), fd_on: ti.template(), fd_off: ti.template(), y, x, on_t, off_t):
-        """``(leftward - rightward, upward - downward)`` of grid point (y, x), ON and OFF summed."""
-        on0, off0 = on_off(f_h[y, x], on_t, off_t)
-        on_r, off_r = on_off(f_h[y, x + 1], on_t, off_t)
-        on_d, off_d = on_off(f_h[y + 1, x], on_t, off_t)
-        left = on0 * fd_on[y, x + 1] + off0 * fd_off[y, x + 1]
-        right = fd_on[y, x] * on_r + fd_off[y, x] * off_r
-        up = on0 * fd_on[y + 1, x] + off0 * fd_off[y + 1, x]
-        down = fd_on[y, x] * on_d + fd_off[y, x] * off_d
-        return left - right, up - down
-
-    @ti.kernel
-    def emd_step(frame: ti.types.ndarray(ndim=2), lum: F2, f_h: F2, fd_on: F2, fd_off: F2, horizontal: F2,
-                 vertical: F2, coef: D1, denom: ti.f32, first: ti.i32):
-        """Luminance ``frame / denom``; on the ``first`` frame only stored in ``lum``, else the temporal
-        filters of every pixel (``f_h``, ``fd_on``, ``fd_off``, (H, W)) and the opponent motion maps
-        ``horizontal``, ``vertical`` ((H-1, W-1))."""
-        b, a = ti.cast(coef[B_HIGH], ti.f32), ti.cast(coef[A_LOW], ti.f32)
-        on_t, off_t = ti.cast(coef[ON_T], ti.f32), ti.cast(coef[OFF_T], ti.f32)
-        for y, x in lum:
-            g = ti.cast(frame[y, x], ti.f32) / denom
-            if first == 0:
-                f_h[y, x], fd_on[y, x], fd_off[y, x] = temporal_filters(f_h[y, x], fd_on[y, x], fd_off[y, x], g,
-                                                                        lum[y, x], b, a, on_t, off_t)
-            lum[y, x] = g
-        for y, x in horizontal:  # a top-level loop (parallel); nothing to do on the first frame
-            if first == 0:
-                horizontal[y, x], vertical[y, x] = opponent_motion(f_h, fd_on, fd_off, y, x, on_t, off_t)
-
-    @ti.kernel
-    def lplc2_columns(horizontal: F2, vertical: F2, h_band: F2, up_cols: F2, down_cols: F2, coef: D1):
-        """The column passes of the arms: ``h_band`` = ``horizontal`` summed over the band rows
-        (y - before .. y + after); ``up_cols`` = ``vertical`` over rows y - half + 1 .. y;
-        ``down_cols`` = ``-vertical`` over rows y + 1 .. y + half."""
-        hs = ti.cast(coef[HALF], ti.i32)
-        lo, hi = -ti.cast(coef[BEFORE], ti.i32), ti.cast(coef[AFTER], ti.i32)
-        for x in range(horizontal.shape[1]):
-            column_window(horizontal, h_band, x, lo, hi, 1.0)
-            column_window(vertical, up_cols, x, 1 - hs, 0, 1.0)
-            column_window(vertical, down_cols, x, 1, hs, -1.0)
+    def filters(a: ti.template()):
+        """The photoreceptor high-pass ``F_h`` and the delay low-passes ``F_d`` of ON and OFF; ``L``."""
+        g = a.grey() / a.value(V.denom)
+        b, lp = a.coef(K.b_high), a.coef(K.a_low)
+        h = b * (g - a.at(L)) + b * a.at(FH)
+        on, off = on_off(h, a.coef(K.on_t), a.coef(K.off_t))
+        a.put(FH, h)
+        a.put(FD_ON, lp * on + (1.0 - lp) * a.at(FD_ON))
+        a.put(FD_OFF, lp * off + (1.0 - lp) * a.at(FD_OFF))
+        a.put(L, g)
 
     @ti.func
-    def unit_response(left, right, up, down, threshold):
-        """The thresholded arms (each kept where ``> threshold``, else 0) and their product."""
-        l_ = ti.select(left > threshold, left, 0.0)
-        r_ = ti.select(right > threshold, right, 0.0)
-        u_ = ti.select(up > threshold, up, 0.0)
-        d_ = ti.select(down > threshold, down, 0.0)
-        return l_, r_, u_, d_, l_ * r_ * u_ * d_
-
-    @ti.kernel
-    def lplc2_arms(h_band: F2, up_cols: F2, down_cols: F2, left: F2, right: F2, up: F2, down: F2, lplc2: F2,
-                   coef: D1, out: D1):
-        """The row passes: the four arms of every unit (left: ``h_band`` over columns x - half + 1 .. x; right:
-        ``-h_band`` over x + 1 .. x + half; up, down: ``up_cols``, ``down_cols`` over the band columns),
-        thresholded in place, and ``lplc2`` their product. Adds the active units (response > 0) to
-        ``out[0]`` and writes the centre unit's response and arms to ``out[1:6]`` (set to 0 by the caller)."""
-        hs = ti.cast(coef[HALF], ti.i32)
-        lo, hi = -ti.cast(coef[BEFORE], ti.i32), ti.cast(coef[AFTER], ti.i32)
-        thr = ti.cast(coef[ARM_T], ti.f32)
-        cy, cx = ti.cast(coef[CORE_R], ti.i32), ti.cast(coef[CORE_C], ti.i32)
-        for y in range(h_band.shape[0]):
-            row_window(h_band, left, y, 1 - hs, 0, 1.0)
-            row_window(h_band, right, y, 1, hs, -1.0)
-            row_window(up_cols, up, y, lo, hi, 1.0)
-            row_window(down_cols, down, y, lo, hi, 1.0)
-            count = 0
-            for x in range(h_band.shape[1]):
-                l_, r_, u_, d_, p = unit_response(left[y, x], right[y, x], up[y, x], down[y, x], thr)
-                left[y, x], right[y, x], up[y, x], down[y, x], lplc2[y, x] = l_, r_, u_, d_, p
-                count += ti.select(p > 0.0, 1, 0)
-                if y == cy and x == cx:
-                    out[1], out[2], out[3], out[4], out[5] = p, l_, r_, u_, d_
-            ti.atomic_add(out[0], ti.cast(count, ti.f64))
-
-    # -- the lane path ---------------------------------------------------------------------------
+    def grid(a: ti.template()):
+        """1 on the (H-1, W-1) unit grid, 0 on the frame's last row and column."""
+        return a.within(0, ti.cast(a.coef(K.grid, 0), ti.i32), 0, ti.cast(a.coef(K.grid, 1), ti.i32))
 
     @ti.func
-    def _lane_grey(frame: ti.template(), i, k, denom):
-        """Luminance ``frame / denom`` of the columns k LANES .. of row ``i`` (past the last column: repeated)."""
-        g = ti.Vector([0.0] * LANES, dt=ti.f32)
-        for l in ti.static(range(LANES)):
-            g[l] = ti.cast(frame[i, ti.min(k * LANES + l, frame.shape[1] - 1)], ti.f32)
-        return g / denom
+    def motion(a: ti.template()):
+        """``horizontal = leftward - rightward``, ``vertical = upward - downward`` of the grid point here."""
+        on_t, off_t = a.coef(K.on_t), a.coef(K.off_t)
+        on0, off0 = on_off(a.at(FH), on_t, off_t)
+        on_r, off_r = on_off(a.at(FH, 0, 1), on_t, off_t)
+        on_d, off_d = on_off(a.at(FH, 1, 0), on_t, off_t)
+        left = on0 * a.at(FD_ON, 0, 1) + off0 * a.at(FD_OFF, 0, 1)
+        right = a.at(FD_ON) * on_r + a.at(FD_OFF) * off_r
+        up = on0 * a.at(FD_ON, 1, 0) + off0 * a.at(FD_OFF, 1, 0)
+        down = a.at(FD_ON) * on_d + a.at(FD_OFF) * off_d
+        inside = grid(a)
+        a.put(HOR, (left - right) * inside)
+        a.put(VER, (up - down) * inside)
+
+    def sums_along(along: int):
+        """The window sums along columns (``along`` 0: row offsets) or rows (1: column offsets): ``window(a, plane,
+        offsets)``, ``run_window(a, plane, offsets)`` (``offsets``: a range of offsets ``k0 .. k1``)."""
+
+        @ti.func
+        def window(a: ti.template(), plane: ti.template(), offsets: ti.template()):
+            """``sum_k plane`` at the ``offsets`` as float32: summed in float64 on the pixel layout, in float32 on
+            the lane layout (whose vectors the compilers do not widen)."""
+            s = a.zeros()
+            if ti.static(a.lane):
+                for run in ti.static(runs(offsets.start, offsets.stop - 1)):
+                    for k in ti.static(run):
+                        s += a.at(plane, k * (1 - along), k * along)
+            else:
+                s64 = ti.f64(0.0)
+                for run in ti.static(runs(offsets.start, offsets.stop - 1)):
+                    for k in ti.static(run):
+                        s64 += ti.cast(a.at(plane, k * (1 - along), k * along), ti.f64)
+                s = ti.cast(s64, ti.f32)
+            return s
+
+        @ti.func
+        def run_window(a: ti.template(), plane: ti.template(), offsets: ti.template()):
+            """``window``; on the lane layout from whole runs of :data:`RUN` lines (:func:`runs_of`) and the lines
+            left over: runs ending at or before the cell for offsets <= 0, runs starting after it for offsets > 0
+            (a run read outside the frame then lies wholly outside it: 0, as its zero border gives)."""
+            s = a.zeros()
+            k0, k1 = ti.static(offsets.start, offsets.stop - 1)
+            if ti.static(a.lane):
+                end, start = ti.static(RUNS_OF[plane.name])
+                if ti.static(k0 <= 0):
+                    lo = ti.static(min(k1, 0))
+                    whole = ti.static((lo - k0 + 1) // RUN)
+                    for q in ti.static(range(whole)):
+                        s += a.at(end, (lo - q * RUN) * (1 - along), (lo - q * RUN) * along)
+                    for k in ti.static(range(k0, lo - whole * RUN + 1)):
+                        s += a.at(plane, k * (1 - along), k * along)
+                if ti.static(k1 > 0):
+                    hi = ti.static(max(k0, 1))
+                    whole = ti.static((k1 - hi + 1) // RUN)
+                    for q in ti.static(range(whole)):
+                        s += a.at(start, (hi + q * RUN) * (1 - along), (hi + q * RUN) * along)
+                    for k in ti.static(range(hi + whole * RUN, k1 + 1)):
+                        s += a.at(plane, k * (1 - along), k * along)
+            else:
+                s = window(a, plane, offsets)
+            return s
+
+        return window, run_window
+
+    (column_window, column_run_window), (row_window, row_run_window) = sums_along(0), sums_along(1)
+    ending, starting = range(1 - RUN, 1), range(0, RUN)  # the runs' offsets
 
     @ti.func
-    def _grid_mask(k, width):
-        """1.0 on the lanes of the k-th element whose column is below ``width``, else 0.0."""
-        m = ti.Vector([1.0] * LANES, dt=ti.f32)
-        for l in ti.static(range(LANES)):
-            m[l] = ti.select(k * LANES + l < width, 1.0, 0.0)
-        return m
+    def column_runs(a: ti.template()):
+        """The lane layout's sums of :data:`RUN` rows ending here and starting here, of the motion maps."""
+        if ti.static(a.lane):
+            for plane in ti.static((HOR, VER)):
+                end, start = ti.static(RUNS_OF[plane.name])
+                a.put(end, column_window(a, plane, ending))
+                a.put(start, column_window(a, plane, starting))
 
     @ti.func
-    def _lane_motion(f_h: ti.template(), fd_on: ti.template(), fd_off: ti.template(), i, e, on_t, off_t):
-        """:func:`opponent_motion` of the LANES grid points of element ``(i, e)``."""
-        on0, off0 = on_off(f_h[i, e], on_t, off_t)
-        on_d, off_d = on_off(f_h[i + 1, e], on_t, off_t)
-        on_n, off_n = on_off(f_h[i, e + 1][0], on_t, off_t)  # the column after the element
-        _, on_r = C.lane_neighbours(0.0, on0, on_n)
-        _, off_r = C.lane_neighbours(0.0, off0, off_n)
-        _, fdn_r = C.lane_neighbours(0.0, fd_on[i, e], fd_on[i, e + 1][0])
-        _, fdf_r = C.lane_neighbours(0.0, fd_off[i, e], fd_off[i, e + 1][0])
-        left = on0 * fdn_r + off0 * fdf_r
-        right = fd_on[i, e] * on_r + fd_off[i, e] * off_r
-        up = on0 * fd_on[i + 1, e] + off0 * fd_off[i + 1, e]
-        down = fd_on[i, e] * on_d + fd_off[i, e] * off_d
-        return left - right, up - down
-
-    @vector_kernel
-    @ti.kernel
-    def lanes_emd_step(frame: ti.types.ndarray(ndim=2), lum: LANE2, f_h: LANE2, fd_on: LANE2, fd_off: LANE2,
-                       horizontal: LANE2, vertical: LANE2, coef: D1, denom: ti.f32, first: ti.i32):
-        """:func:`emd_step` on lane arrays: state (H, NB), motion maps (H-1, NB), zero past column W-2."""
-        b, a = ti.cast(coef[B_HIGH], ti.f32), ti.cast(coef[A_LOW], ti.f32)
-        on_t, off_t = ti.cast(coef[ON_T], ti.f32), ti.cast(coef[OFF_T], ti.f32)
-        G = ti.cast(coef[GHOSTS], ti.i32)
-        H, W = frame.shape[0], frame.shape[1]
-        E1 = lum.shape[1] - 2 * G
-        for n in range(H * E1):
-            i, k = n // E1, n % E1
-            g = _lane_grey(frame, i, k, denom)
-            if first == 0:
-                f_h[i, G + k], fd_on[i, G + k], fd_off[i, G + k] = temporal_filters(
-                    f_h[i, G + k], fd_on[i, G + k], fd_off[i, G + k], g, lum[i, G + k], b, a, on_t, off_t)
-            lum[i, G + k] = g
-        for n in range((H - 1) * E1):  # a top-level loop (parallel); nothing to do on the first frame
-            i, k = n // E1, n % E1
-            if first == 0:
-                hm, vm = _lane_motion(f_h, fd_on, fd_off, i, G + k, on_t, off_t)
-                mask = _grid_mask(k, W - 1)
-                horizontal[i, G + k] = hm * mask
-                vertical[i, G + k] = vm * mask
-
-    @vector_kernel
-    @ti.kernel
-    def lanes_columns(horizontal: LANE2, vertical: LANE2, bands: LANE3, coef: D1):
-        """:func:`lplc2_columns` on lane arrays: ``bands`` = (h_band, up_cols, down_cols), (3, H-1, NB)."""
-        hs = ti.cast(coef[HALF], ti.i32)
-        lo, hi = -ti.cast(coef[BEFORE], ti.i32), ti.cast(coef[AFTER], ti.i32)
-        G = ti.cast(coef[GHOSTS], ti.i32)
-        E1 = horizontal.shape[1] - 2 * G
-        H, B = horizontal.shape[0], pooling.COLUMN_BLOCK
-        for n in range((H + B - 1) // B * E1):
-            i0, e = n // E1 * B, G + n % E1
-            i1 = ti.min(i0 + B, H)
-            lane_column_block(horizontal, bands, 0, i0, i1, e, lo, hi, 1.0)
-            lane_column_block(vertical, bands, 1, i0, i1, e, 1 - hs, 0, 1.0)
-            lane_column_block(vertical, bands, 2, i0, i1, e, 1, hs, -1.0)
+    def row_runs(a: ti.template()):
+        """The lane layout's sums of :data:`RUN` columns ending here and starting here, of the column passes."""
+        if ti.static(a.lane):
+            for plane in ti.static((H_BAND, UP_COLS, DOWN_COLS)):
+                end, start = ti.static(RUNS_OF[plane.name])
+                a.put(end, row_window(a, plane, ending))
+                a.put(start, row_window(a, plane, starting))
 
     @ti.func
-    def _lane_core(out: ti.template(), k, cx, arms: ti.template()):
-        """Write the centre unit's (column ``cx``) response and arms to ``out[1:6]`` if element ``k`` holds it."""
-        for l in ti.static(range(LANES)):
-            if k * LANES + l == cx:
-                for m in ti.static(range(5)):
-                    out[1 + m] = arms[(m + 4) % 5][l]
+    def columns(a: ti.template()):
+        """The column passes: ``horizontal`` over the band rows, ``vertical`` over the half-fields above
+        (up) and below (down, negated)."""
+        half, before, after = ti.static(a.option("half"), a.option("before"), a.option("after"))
+        a.put(H_BAND, column_run_window(a, HOR, range(-before, after + 1)))
+        a.put(UP_COLS, column_run_window(a, VER, range(1 - half, 1)))
+        a.put(DOWN_COLS, 0.0 - column_run_window(a, VER, range(1, half + 1)))
 
-    @vector_kernel
-    @ti.kernel
-    def lanes_arms(bands: LANE3, prefix: LANE3, maps: LANE3, coef: D1, out: D1, half: ti.template(),
-                   before: ti.template(), after: ti.template()):
-        """:func:`lplc2_arms` on lane arrays: ``prefix`` the in-element prefixes of ``bands`` (3, H-1, NB),
-        ``maps`` the thresholded arms and responses (left, right, up, down, lplc2; (5, H-1, NB)); the
-        window geometry (``half``, ``before``, ``after``) is compiled in."""
-        thr = ti.cast(coef[ARM_T], ti.f32)
-        cy, cx = ti.cast(coef[CORE_R], ti.i32), ti.cast(coef[CORE_C], ti.i32)
-        G = ti.cast(coef[GHOSTS], ti.i32)
-        E1 = bands.shape[2] - 2 * G
-        width = ti.cast(coef[GRID_COLS], ti.i32)
-        for i in range(bands.shape[1]):
-            for e in range(G, G + E1):
-                for m in ti.static(range(3)):
-                    prefix[m, i, e] = lane_prefix(bands[m, i, e])
-            count = ti.f64(0.0)
-            for k in range(E1):
-                e = G + k
-                left = lane_window(prefix, 0, i, e, 1 - half, 0)
-                arms = unit_response(left, -1.0 * lane_window(prefix, 0, i, e, 1, half),
-                                     lane_window(prefix, 1, i, e, -before, after),
-                                     lane_window(prefix, 2, i, e, -before, after), thr)
-                mask = _grid_mask(k, width)  # the units of the grid's columns
-                for m in ti.static(range(5)):
-                    maps[m, i, e] = arms[m] * mask
-                count += ti.cast((ti.select(arms[4] > 0.0, 1.0, 0.0) * mask).sum(), ti.f64)
-                if i == cy:
-                    _lane_core(out, k, cx, arms)
-            ti.atomic_add(out[0], count)
+    @ti.func
+    def kept(arm, threshold):
+        """The arm where ``> threshold``, else 0."""
+        return ti.select(arm > threshold, arm, 0.0)
 
-    return namespace(globals(), locals())
+    @ti.func
+    def arms(a: ti.template()):
+        """The row passes: the four thresholded arms and their product; returns (unit active, centre response)."""
+        half, before, after = ti.static(a.option("half"), a.option("before"), a.option("after"))
+        thr, inside = a.coef(K.arm_t), grid(a)
+        left = kept(row_run_window(a, H_BAND, range(1 - half, 1)), thr)
+        right = kept(0.0 - row_run_window(a, H_BAND, range(1, half + 1)), thr)
+        up = kept(row_run_window(a, UP_COLS, range(-before, after + 1)), thr)
+        down = kept(row_run_window(a, DOWN_COLS, range(-before, after + 1)), thr)
+        p = left * right * up * down * inside
+        a.put(LEFT, left * inside)
+        a.put(RIGHT, right * inside)
+        a.put(UP, up * inside)
+        a.put(DOWN, down * inside)
+        a.put(LPLC2, p)
+        return ti.select(p > 0.0, 1.0, 0.0), p * centre(a)
+
+    @ti.func
+    def centre(a: ti.template()):
+        """1 at the centre unit, else 0."""
+        cy, cx = ti.cast(a.coef(K.core, 0), ti.i32), ti.cast(a.coef(K.core, 1), ti.i32)
+        return a.within(cy, cy + 1, cx, cx + 1)
+
+    @ti.func
+    def centre_lr(a: ti.template()):
+        """The centre unit's left and right arms."""
+        c = centre(a)
+        return a.at(LEFT) * c, a.at(RIGHT) * c
+
+    @ti.func
+    def centre_ud(a: ti.template()):
+        """The centre unit's up and down arms."""
+        c = centre(a)
+        return a.at(UP) * c, a.at(DOWN) * c
+
+    first = Launch("store", Stage(store))
+    frame = Launch("frame", Stage(filters, ghosts=(FH, FD_ON, FD_OFF)), Stage(motion), Stage(column_runs),
+                   Stage(columns, ghosts=(H_BAND, UP_COLS, DOWN_COLS), halo="reach"),
+                   Stage(row_runs, ghosts=RUNS[4:], halo="reach"),
+                   Stage(arms, sums="active core"), Stage(centre_lr, sums="left right"),
+                   Stage(centre_ud, sums="up down"))
+    return engine.model(PLANES, COEFS, SCALARS, engine.build(ti, lanes), first, frame)

@@ -119,7 +119,7 @@ print("RESULT", bool(np.array_equal(y.to_numpy(), a)))
 
 @broken("subtract_assign")
 def test_subtract_assign_compiles_on_an_explicit_vector():
-    # kernels/pooling.py writes `acc = acc - x` (the compilers emit an integer subtraction and abort)
+    # a lane stage writes `acc = acc - x` (the compilers emit an integer subtraction and abort)
     assert _result(_child(_SUBTRACT_ASSIGN.format(compiler=COMPILER))) == "True"
 
 

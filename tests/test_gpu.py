@@ -94,10 +94,6 @@ def test_a_gpu_gets_one_work_item_per_run_of_columns():
     assert column_blocks(8, "cuda") == 1
 
 
-#: models whose generic kernels are plain per-pixel loops, not runs of columns
-PER_PIXEL = {"lplc2"}
-
-
 @pytest.mark.parametrize("name", MODELS)
 def test_the_gpu_work_partition_computes_the_reference_result(name, monkeypatch):
     # the generic kernels with the GPU's work items (one per run of columns), run here on the CPU
@@ -111,8 +107,6 @@ def test_the_gpu_work_partition_computes_the_reference_result(name, monkeypatch)
     got = model.run(frames)
     if model.kernels is not None:  # the engine's pixel layout: one work item per pixel
         assert model._be.lane is False
-    elif name in PER_PIXEL:  # its generic kernels give a GPU one work item per pixel
-        assert type(model._be).__name__ == "TaichiLPLC2Backend"
     else:
         assert model._be.blocks == 5  # 70 px: five runs of 16 columns, the last one partial
     ref = create_model(name, backend="numpy").run(frames)

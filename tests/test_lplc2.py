@@ -17,7 +17,6 @@ from itertools import islice
 import numpy as np
 import pytest
 
-from cdnf_ti.backends.lplc2 import LaneTaichiLPLC2Backend, TaichiLPLC2Backend
 from cdnf_ti.bench.inputs import standin_video
 from cdnf_ti.lplc2_reference import LPLC2Reference
 from cdnf_ti.models import LPLC2, LPLC2Params, create_model
@@ -35,12 +34,12 @@ def stimulus_frames(name: str, height: int = H, width: int = W) -> tuple:
 
 
 def run_both(frames, fps: float = FPS, generic: bool = False, monkeypatch=None):
-    """The engine model's trace and the reference's per-frame outputs on ``frames``."""
-    if generic:
-        monkeypatch.setattr(LaneTaichiLPLC2Backend, "supports", staticmethod(lambda shape, arch="cpu": False))
+    """The engine model's trace (the lane layout, or the pixel layout where ``generic``) and the reference's
+    per-frame outputs on ``frames``."""
     model = LPLC2(fps=fps)
+    model.fast = not generic
     trace = model.run(frames)
-    assert isinstance(model._be, TaichiLPLC2Backend if generic else LaneTaichiLPLC2Backend)
+    assert model._be.lane is not generic
     h, w = np.asarray(frames[0]).shape[:2]
     return trace, LPLC2Reference(h, w, fps=fps).run(frames)
 
@@ -97,7 +96,7 @@ def test_lane_maps_match_reference_maps_at_widths_around_the_lane_width(width):
     frames = [np.ascontiguousarray(base[:, 2 * t: 2 * t + width]).astype(np.float32) for t in range(5)]
     fast, ref = LPLC2(fps=FPS), LPLC2(fps=FPS, backend="numpy")
     fast.run(frames), ref.run(frames)
-    assert isinstance(fast._be, LaneTaichiLPLC2Backend)
+    assert fast._be.lane is (width + 1 >= 64)  # the lane layout from two lane vectors on, else the pixel layout
     fa, fb = fast.fields(), ref.fields()
     assert set(fa) == set(fb) == {"horizontal", "vertical", "left", "right", "up", "down", "lplc2"}
     for k in fb:

@@ -15,7 +15,6 @@ from __future__ import annotations
 from typing import Any, Callable
 
 from .. import taichi_runtime
-from . import lplc2
 from .engine import Backend
 
 #: Backend factories by model name: ``factory(model, shape, arch) -> backend``.
@@ -71,4 +70,3 @@ class Engine:
 ENGINE = Engine()
 
 
-register_backend("lplc2", lplc2.make_backend)

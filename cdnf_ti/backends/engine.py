@@ -44,9 +44,11 @@ class Backend:
         self.modes = engine.borders(self.M.planes, model.borders() if hasattr(model, "borders") else {})
         self.options = tuple(sorted(model.kernel_options().items())) if hasattr(model, "kernel_options") else ()
         n = self.M.planes.count
+        #: ghost elements either side of a lane row: the stages' widest halo (:func:`engine.ghost_elements`)
+        self.ghosts = engine.ghost_elements(self.M.launches.values(), dict(self.options), lanes())
         if self.lane:
             C = kernels("common")
-            self.x = C.lane_array(n, H=H, NB=C.lane_layout(W)[1])
+            self.x = C.lane_array(n, H=H, NB=C.lane_layout(W)[1] + 2 * (self.ghosts - 1))
         else:
             self.x = ti.ndarray(ti.f32, (n, H, W))
         values = engine.coefficient_array(self.M.coefs, model.coefficients() if len(self.M.coefs) else {})
@@ -116,7 +118,7 @@ class Backend:
             self.fr[getattr(self.M.scalars, k).slot] = v
         launch = self.M.launches[name]
         return launch, self.M.engine.kernel(launch, self.lane, self.shape[1] if self.lane else 0, self.modes,
-                                              self.options)
+                                              self.options, self.ghosts if self.lane else 1)
 
     def _run(self, run: Any, record: LaunchRecord, *part: Any) -> None:
         if part:  # the pixel layout: the part of the launch (its index in PARTS) and the update
@@ -164,6 +166,6 @@ class Backend:
         x = self.x.to_numpy()
         if self.lane:
             n, (H, W) = lanes(), self.shape
-            x = x.reshape(x.shape[0], H, -1)[:, :, n:n + W]
+            x = x.reshape(x.shape[0], H, -1)[:, :, n * self.ghosts:n * self.ghosts + W]
         return {p.name: np.ascontiguousarray(x[p.slot + ((self.mask >> p.bit) & 1 if p.buffers == 2 else 0)])
                 for p in self.M.planes if not p.name.startswith("_")}

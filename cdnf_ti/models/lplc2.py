@@ -125,7 +125,8 @@ class LPLC2(Model):
     panels = (("horizontal", "EMD left - right"), ("vertical", "EMD up - down"), ("lplc2", "LPLC2 response"))
     output_name = "V"
     params_type = LPLC2Params
-    #: the lane kernels where they apply; False: the generic (H, W) kernels that GPUs run
+    #: The stages (``kernels/lplc2.py``); ``fast``: the lane layout where it applies (False: the pixel layout).
+    kernels = "lplc2"
     fast: bool = True
     description = "EMD-LPLC2 array with a giant-fibre LIF (Zhao et al. 2023); equations from the authors' MATLAB"
 
@@ -162,14 +163,47 @@ class LPLC2(Model):
     def _numpy_backend(self, shape: tuple[int, int]) -> NumpyLPLC2Backend:
         return NumpyLPLC2Backend(self.params, shape, self.fps)
 
+    def _taichi_backend(self, shape: tuple[int, int]):
+        self.shape = tuple(shape)  # coefficients() places the unit grid and its centre unit
+        return super()._taichi_backend(shape)
+
+    def coefficients(self) -> dict[str, float | tuple[int, int]]:
+        """The stages' coefficients by name: the filters' ``b = d_h / (d_h + 1)``, ``a = 1 / (d_l + 1)``
+        (``d = tau / dt``), the thresholds, the unit grid (H-1, W-1) and its centre unit."""
+        p, dt = self.params, 1.0 / float(self.fps)
+        d_h, d_l = p.tau_h / dt, p.tau_l / dt
+        H, W = self.shape
+        return dict(b_high=d_h / (d_h + 1.0), a_low=1.0 / (d_l + 1.0), on_t=p.on_threshold, off_t=p.off_threshold,
+                    arm_t=p.arm_threshold, grid=(H - 1, W - 1), core=core_unit(self.shape))
+
+    def kernel_options(self) -> dict[str, int]:
+        """The arms' window geometry (px), compiled in; ``reach``: the farthest column a row window reads."""
+        p = self.params
+        half, before, after = int(p.half_side), int(p.band_before), int(p.band_after)
+        return dict(half=half, before=before, after=after, reach=max(half, before, after))
+
+    def borders(self) -> dict[str, str]:
+        """The motion maps and their column passes count zero outside the grid."""
+        return {name: "zero" for name in ("horizontal", "vertical", "_h_band", "_up_cols", "_down_cols", "_hor_end",
+                                          "_hor_start", "_ver_end", "_ver_start", "_h_end", "_h_start", "_up_end",
+                                          "_up_start", "_down_end", "_down_start")}
+
     def _reset_state(self) -> None:
         self.v = self.params.v_rest
         self.active_prev: int | None = None
 
     def _step(self, t: int, grey: np.ndarray, loaded: None) -> StepResult:
+        engine = not isinstance(self._be, NumpyLPLC2Backend)  # the reference loaded the frame already
+        scale = dict(denom=255.0 if grey.dtype == np.uint8 else 1.0)
         if t == 0:
+            if engine:
+                self._be.launch("store", **scale)
             return StepResult(t, self.v, False, True, self._diagnostics(0, 0, 0.0, 0.0, (0.0,) * 4, self.v))
-        active, core, arms = self._be.pool()
+        if engine:
+            active, core, *arms = self._be.launch("frame", **scale)
+            active = int(round(active))
+        else:
+            active, core, arms = self._be.pool()
         current = self._gf_input(active)
         self.active_prev = active
         self.v, spikes, v_peak = gf_frame(self.v, current, 1.0 / self.fps, self.params)
@@ -187,6 +221,11 @@ class LPLC2(Model):
         left, right, up, down = arms
         return dict(spikes=spikes, active=active, current=current, core=core, arm_left=left, arm_right=right,
                     arm_up=up, arm_down=down, dt=1.0 / self.fps, V_peak=v_peak)
+
+
+def core_unit(shape: tuple[int, int]) -> tuple[int, int]:
+    """The centre unit (row, column) of the (H-1, W-1) grid: MATLAB's ``floor(end / 2)``, 0-based."""
+    return max((shape[0] - 1) // 2 - 1, 0), max((shape[1] - 1) // 2 - 1, 0)
 
 
 def gf_frame(v: float, current: float, dt: float, p: LPLC2Params) -> tuple[float, int, float]:
