@@ -7,23 +7,15 @@ package). Importing this package loads no compiler: the runtime starts when the 
 model with the ``"taichi"`` backend is made, and the kernels are built then
 (:func:`cdnf_ti.taichi_runtime.kernels`).
 
-A model that names its kernel module (``Model.kernels``) runs on the one generic backend,
-:class:`~cdnf_ti.backends.engine.Backend`; :func:`register_backend` remains for the models not yet on it.
+Every model names its kernel module (``Model.kernels``) and runs on the one generic backend,
+:class:`~cdnf_ti.backends.engine.Backend`.
 """
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import Any
 
 from .. import taichi_runtime
 from .engine import Backend
-
-#: Backend factories by model name: ``factory(model, shape, arch) -> backend``.
-FACTORIES: dict[str, Callable[[Any, tuple[int, int], str], Any]] = {}
-
-
-def register_backend(name: str, factory: Callable[[Any, tuple[int, int], str], Any]) -> None:
-    """Make ``factory(model, shape, arch)`` build the compiled backend of the model named ``name``."""
-    FACTORIES[name] = factory
 
 
 class Engine:
@@ -55,18 +47,10 @@ class Engine:
     @staticmethod
     def backend(model: Any, shape: tuple[int, int]) -> Any:
         """The compiled backend of ``model`` for frames of ``shape`` (H, W)."""
-        # the model's own name, else the nearest base class's (a subclass that changes no equations)
-        names = [model.name] + [c.__dict__["name"] for c in type(model).__mro__ if "name" in c.__dict__]
-        factory = next((FACTORIES[n] for n in names if n in FACTORIES), None)
-        if factory is None and getattr(model, "kernels", None) is not None:
-            factory = Backend
-        if factory is None:
-            raise NotImplementedError(f"{type(model).__name__} has no compiled backend "
-                                      "(cdnf_ti.backends.register_backend)")
+        if getattr(model, "kernels", None) is None:
+            raise NotImplementedError(f"{type(model).__name__} names no kernel module (Model.kernels)")
         arch = taichi_runtime.ensure_taichi(model.arch)
-        return factory(model, tuple(shape), arch)
+        return Backend(model, tuple(shape), arch)
 
 
 ENGINE = Engine()
-
-
