@@ -36,6 +36,11 @@ is ours: neither file has one.
 
 Frame alignment: their loop index ``i`` (1-based) reads pictures ``i .. i + 3``;
 its outputs are this reference's frame ``t = i + 2``. Frames 0-2 give 0.
+
+Event bins (:meth:`DLGMDReference.step_on_off`, ours: their code takes frames): a
+bin's ON/OFF contrasts ``p_on``, ``p_off`` in [0, 1] give the difference
+``D_1 = p_on + p_off`` directly, so every bin is a difference and bin ``t`` plays
+frame ``t + 1``'s part (bins 0-1 give 0, the membrane starts at bin 4).
 """
 from __future__ import annotations
 
@@ -44,7 +49,7 @@ from typing import Iterable
 
 import numpy as np
 
-from .errors import UserError
+from .errors import InputError, UserError
 from .lgmd_p_on_off_reference import correlate_same, grey_levels
 from .lplc2_reference import _window_sum
 
@@ -138,21 +143,38 @@ class DLGMDReference:
     def reset(self) -> None:
         """Back to the state before the first frame."""
         self.t = 0
-        self.lum: list[np.ndarray] = []  # the last four luminance frames, oldest first
+        self.lum: np.ndarray | None = None  # the last frame's luminance
+        self.diffs: list[np.ndarray] = []  # the last three differences D, oldest first
+        self.n_diff = 0  # differences so far (frame t has t, event bin t has t + 1)
         self.k_prev = 0.5
         self.mp = 0.0
         self.layers: dict[str, np.ndarray] = {}
 
     def step(self, frame: np.ndarray) -> DLGMDStep:
         """Advance one frame; returns this frame's output (uses no later frame)."""
-        p = self.params
         lum = grey_levels(frame, (self.height, self.width), False, f"frame {self.t}") / 255.0
-        self.lum = (self.lum + [lum])[-(WARMUP + 1):]
-        t = self.t
+        d1 = None if self.lum is None else np.abs(lum - self.lum)
+        self.lum = lum
+        return self._advance(d1)
+
+    def step_on_off(self, p_on: np.ndarray, p_off: np.ndarray) -> DLGMDStep:
+        """Advance one event bin (``p_on``, ``p_off``: (H, W) contrasts in [0, 1]): its difference
+        ``D_1 = p_on + p_off`` (every bin is a difference, bin 0 included)."""
+        d1 = np.asarray(p_on, np.float64) + np.asarray(p_off, np.float64)
+        if d1.shape != (self.height, self.width):
+            raise InputError(f"bin {self.t}", f"expected {self.width}x{self.height} px, got shape {d1.shape}")
+        return self._advance(d1)
+
+    def _advance(self, d1: np.ndarray | None) -> DLGMDStep:
+        """One step with the newest difference ``d1`` (None: the first frame, which has none)."""
+        p = self.params
         self.t += 1
-        if t < WARMUP:
+        if d1 is not None:
+            self.diffs = (self.diffs + [d1])[-WARMUP:]
+            self.n_diff += 1
+        if self.n_diff < WARMUP:
             return DLGMDStep(0.0, 0.0, 0.0, 0.0, 0.5, 0.0, False)
-        d3, d2, d1 = (np.abs(b - a) for a, b in zip(self.lum[:-1], self.lum[1:]))
+        d3, d2, d1 = self.diffs
         ffi = float(d3.sum())
         thresh_g = min(p.thresh_g0 * ffi * p.ffi_scale, p.thresh_g_max)
         e = correlate_same(d1, self.k_e, "constant")
@@ -164,13 +186,13 @@ class DLGMDReference:
         g = np.minimum(g, 1.0)
         g_sum = float(g.sum())
         k = 1.0 / (1.0 + np.exp(-g_sum / (p.k_spread * p.k_norm_per_pixel * self.height * self.width)))
-        if t >= SFA_START:
+        if self.n_diff >= SFA_START:
             dk = k - self.k_prev
             self.mp = p.sfa_gain * k if dk >= p.sfa_rise else p.sfa_gain * self.mp + p.sfa_gain * dk
         self.k_prev = k
         self.layers = {"E": e, "I": i, "S": s, "G": g}
         return DLGMDStep(g_sum, float(s.sum()), ffi, float(thresh_g), float(k), float(self.mp),
-                         bool(t >= SFA_START and self.mp >= p.threshold))
+                         bool(self.n_diff >= SFA_START and self.mp >= p.threshold))
 
     def run(self, frames: Iterable[np.ndarray]) -> dict[str, np.ndarray]:
         """Step through ``frames`` from the current state; one array per :class:`DLGMDStep` field, shape (T,)."""

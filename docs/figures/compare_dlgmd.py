@@ -90,16 +90,16 @@ def run_authors(repo: Path, frames: list[np.ndarray], octave: str) -> np.ndarray
         return np.loadtxt(out, delimiter=",", ndmin=2)
 
 
-def their_alerts(g_sum: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """Our membrane, SFA and threshold on their ``sum G`` (our frames 3 ..), as booleans."""
+def their_membrane(g_sum: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Our membrane, SFA and threshold on their ``sum G`` (our frames 3 ..): ``mp`` and the alerts."""
     p = DLGMDParams()
     k = 1.0 / (1.0 + np.exp(-g_sum / (p.k_spread * p.k_norm_per_pixel * shape[0] * shape[1])))
-    mp, out = 0.0, np.zeros(len(k), dtype=bool)
+    mp, out = np.zeros(len(k)), np.zeros(len(k), dtype=bool)
     for j in range(2, len(k)):  # frame 5 = loop index 3
         dk = k[j] - k[j - 1]
-        mp = p.sfa_gain * k[j] if dk >= p.sfa_rise else p.sfa_gain * mp + p.sfa_gain * dk
-        out[j] = mp >= p.threshold
-    return out
+        mp[j] = p.sfa_gain * k[j] if dk >= p.sfa_rise else p.sfa_gain * mp[j - 1] + p.sfa_gain * dk
+        out[j] = mp[j] >= p.threshold
+    return mp, out
 
 
 def first(mask: np.ndarray, offset: int = 0):
@@ -117,9 +117,11 @@ def compare(repo: Path, frames: list[np.ndarray], octave: str) -> dict:
     h, w = frames[0].shape
     ours = DLGMDReference(h, w).run(frames)
     sl = slice(3, 3 + len(theirs))
-    return {"frames": len(frames), "S": rel(theirs[:, 0], ours["s_sum"][sl]), "G": rel(theirs[:, 1], ours["g_sum"][sl]),
+    mp, alerts = their_membrane(theirs[:, 1], (h, w))
+    return {"mp": float(np.max(np.abs(mp - ours["mp"][sl]))) if len(mp) else 0.0,
+            "frames": len(frames), "S": rel(theirs[:, 0], ours["s_sum"][sl]), "G": rel(theirs[:, 1], ours["g_sum"][sl]),
             "FFI": rel(theirs[:, 2], ours["ffi"][sl]), "max_G": float(ours["g_sum"].max()),
-            "first_theirs": first(their_alerts(theirs[:, 1], (h, w)), 3), "first_ours": first(ours["alert"])}
+            "first_theirs": first(alerts, 3), "first_ours": first(ours["alert"])}
 
 
 def grey_u8(f: np.ndarray) -> np.ndarray:
@@ -180,14 +182,14 @@ def main(argv=None) -> int:
     clips += [(Path(p).name, lambda p=p: real_clip(p, args.real_frames, args.real_scale)) for p in args.real]
     print(f"alert: mp >= {DLGMDParams().threshold} (ours, on both sides' sum G)")
     print(f"{'clip':30s} {'size':>9s} {'T':>4s} {'rel dS':>9s} {'rel dG':>9s} {'rel dFFI':>9s} {'max G':>9s} "
-          "first alert (theirs/ours)")
+          f"{'max |d mp|':>10s} first alert (theirs/ours)")
     for name, make in clips:
         frames = make()
         r = compare(args.repo, frames, args.octave)
         h, w = frames[0].shape
         same = "equal" if r["first_theirs"] == r["first_ours"] else "DIFFERENT"
         print(f"{name:30s} {f'{w}x{h}':>9s} {r['frames']:4d} {r['S']:9.2e} {r['G']:9.2e} {r['FFI']:9.2e} "
-              f"{r['max_G']:9.1f} {r['first_theirs']}/{r['first_ours']} {same}", flush=True)
+              f"{r['max_G']:9.1f} {r['mp']:10.1e} {r['first_theirs']}/{r['first_ours']} {same}", flush=True)
     return 0
 
 
