@@ -24,6 +24,8 @@ Per frame ``t`` (0-based, the ``t``-th frame read; grey levels 0..255):
 
 Every spatial filter is a correlation with OpenCV's default border
 (reflect-101: ``dcb|abcd|cba``). Frame 0 only stores the picture.
+An event bin (:meth:`LGMDPOnOffReference.step_on_off`) gives ``P_on = 255 p_on``,
+``P_off = 255 p_off`` directly; every bin is a full step, bin 0 included.
 
 The authors' code stops at ``mp``: it has no alert. The alert here is
 ``mp >= threshold`` (:attr:`LGMDPOnOffParams.threshold`), our choice.
@@ -208,8 +210,22 @@ class LGMDPOnOffReference:
             mp0 = 0.0 if self.variant == "code" else 0.5
             return LGMDPOnOffStep(mp0, mp0 >= p.threshold, 0.0, 0.0)
         big_p = g - self.grey_prev
-        e_on, s_on = self._channel(np.maximum(big_p, 0.0), self.e_on_prev, p.alpha_2, p.alpha_3)
-        e_off, s_off = self._channel(np.maximum(-big_p, 0.0), self.e_off_prev, p.alpha_4, p.alpha_5)
+        self.grey_prev = g
+        return self._layers(np.maximum(big_p, 0.0), np.maximum(-big_p, 0.0))
+
+    def step_on_off(self, p_on: np.ndarray, p_off: np.ndarray) -> LGMDPOnOffStep:
+        """Advance one event bin: ``P_on = 255 p_on``, ``P_off = 255 p_off`` (``p_on``, ``p_off``: (H, W)
+        contrast in [0, 1]) replace the frame difference. Every bin is a full step, bin 0 included."""
+        shape = (self.height, self.width)
+        if np.shape(p_on) != shape or np.shape(p_off) != shape:
+            raise InputError(f"bin {self.t}", f"expected two {shape[1]}x{shape[0]} planes")
+        return self._layers(255.0 * np.asarray(p_on, np.float64), 255.0 * np.asarray(p_off, np.float64))
+
+    def _layers(self, p_on: np.ndarray, p_off: np.ndarray) -> LGMDPOnOffStep:
+        """The layers of one step from its ``P_on``, ``P_off`` (grey levels, (H, W)); updates the state."""
+        p = self.params
+        e_on, s_on = self._channel(p_on, self.e_on_prev, p.alpha_2, p.alpha_3)
+        e_off, s_off = self._channel(p_off, self.e_off_prev, p.alpha_4, p.alpha_5)
         s = p.theta_1 * s_on + p.theta_2 * s_off + p.theta_3 * s_on * s_off
         ce = correlate_same(s, self.k_g, "reflect")
         max_ce = float(ce.max())
@@ -217,9 +233,9 @@ class LGMDPOnOffReference:
         gl[gl * p.c_de < p.t_de] = 0.0
         sum_g = float(gl.sum())
         mp = 1.0 / (1.0 + np.exp(-sum_g / (self.height * self.width * p.sigmoid_scale)))
-        self.layers = {"P": big_p, "E_on": e_on, "E_off": e_off, "S_on": s_on, "S_off": s_off, "S": s,
+        self.layers = {"P": p_on - p_off, "E_on": e_on, "E_off": e_off, "S_on": s_on, "S_off": s_off, "S": s,
                        "Ce": ce, "G": gl}
-        self.grey_prev, self.e_on_prev, self.e_off_prev = g, e_on, e_off
+        self.e_on_prev, self.e_off_prev = e_on, e_off
         self.t += 1
         return LGMDPOnOffStep(float(mp), bool(mp >= p.threshold), sum_g, max_ce)
 
