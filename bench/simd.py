@@ -35,8 +35,7 @@ _SCALAR = re.compile(r"\bfloat\b")
 _DEFINE = re.compile(r"^define\s[^@]*@([A-Za-z_][A-Za-z0-9_]*)", re.M)
 
 #: The C-DNF launches reported: (name prefix of the kernel in the IR, label).
-SOLVE_KERNELS = (("lanes_contrast_solve", "ON/OFF contrast solve"),
-                 ("lanes_summation_solve", "Summation solve"))
+SOLVE_KERNELS = (("run_lanes", "lane launches (solves among them)"),)
 
 
 def float_arith_widths(ir: str) -> collections.Counter:
@@ -72,7 +71,7 @@ def vector_share(widths: Mapping[int, int]) -> float:
 
 
 def kernel_widths(ir_dir: str) -> dict[str, collections.Counter]:
-    """Per C-DNF solve launch, the widths of :func:`float_arith_widths` in the IR files of ``ir_dir``.
+    """The widths of :func:`float_arith_widths` of C-DNF's lane launches (its two solves among them) in ``ir_dir``.
 
     Parameters
     ----------

@@ -104,11 +104,11 @@ def test_cuda_arch_runs_or_fails_with_one_line(compiler, tmp_path):
 
 
 def test_kernel_modules_are_built_for_the_runtimes_dsl():
-    from cdnf_ti.kernels import cdnf, common, lgmd, sdnf, stimuli
+    from cdnf_ti.kernels import common
+    from cdnf_ti.models import MODELS
     from cdnf_ti.taichi_runtime import dsl, kernels
 
-    for mod in (cdnf, common, lgmd, sdnf, stimuli):
-        name = mod.__name__.rsplit(".", 1)[1]
+    for name in sorted({m.kernels for m in MODELS.values() if isinstance(m.kernels, str)}) + ["common", "stimuli"]:
         built = kernels(name)
         dsl_of = built.engine.ti if hasattr(built, "engine") else built.ti  # a model on the engine core: its engine's
         assert dsl_of is dsl() and kernels(name) is built  # built once per process
@@ -224,7 +224,7 @@ def test_the_lane_width_of_the_fast_path_suits_the_compiler(compiler):
     # (docs/PERFORMANCE.md, "Design decisions that still hold")
     code = ("from cdnf_ti.taichi_runtime import ensure_taichi\nensure_taichi('cpu')\n"
             "from cdnf_ti.taichi_runtime import kernels\n"
-            "print(kernels('common').LANES, kernels('cdnf').LANES, kernels('lgmd').LANES)")
+            "print(kernels('common').LANES, kernels('cdnf').engine.LANES, kernels('olgmd').engine.LANES)")
     env = dict(os.environ, **{COMPILER_ENV: compiler})
     env.pop(LANES_ENV, None)
     proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True)
@@ -265,7 +265,7 @@ def test_an_unsupported_lane_count_is_a_one_line_error(tmp_path):
 
 
 _IR = """
-define void @lanes_contrast_solve_c86_0_kernel_0_serial(ptr %context) {
+define void @run_lanes_c86_0_kernel_0_serial(ptr %context) {
   %a = fadd float %x, 1.000000e+00
   %b = fmul reassoc ninf nsz afn <8 x float> %v, %w
   %c = fadd <8 x float> %b, %b
@@ -292,9 +292,9 @@ def test_the_simd_report_reads_only_the_solve_launches(tmp_path):
     from cdnf_ti.bench.simd import kernel_widths
 
     (tmp_path / "x_kernel_cpu_llvm_ir_optimized_0000.ll").write_text(_IR)
-    other = _IR.replace("lanes_contrast_solve", "lanes_load_frame")  # a launch that is not a solve
+    other = _IR.replace("run_lanes", "run_pixels")  # a launch that is not on the lane layout
     (tmp_path / "x_kernel_cpu_llvm_ir_optimized_0001.ll").write_text(other)
-    assert kernel_widths(str(tmp_path)) == {"ON/OFF contrast solve": {1: 2, 8: 2, 4: 1}}
+    assert kernel_widths(str(tmp_path)) == {"lane launches (solves among them)": {1: 2, 8: 2, 4: 1}}
 
 
 @pytest.mark.parametrize("compiler", installed_compilers())

@@ -151,7 +151,7 @@ def test_every_event_models_bins_match_the_reference_on_mixed_on_off_pixels(name
     assert a.n_frames == len(bins)
     assert np.max(np.abs(a.output - b.output)) < 1e-4
     assert np.array_equal(a.spike, b.spike)
-    assert np.ptp(b.output) > 1e-3  # the bins really move the output
+    assert any(np.ptp(f) > 1e-3 for f in model.fields().values())  # the bins really reach the model's planes
 
 
 def test_lgmd_channels_take_255_times_the_net_contrast():
