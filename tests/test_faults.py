@@ -785,15 +785,27 @@ def _wchan(pid: int) -> str:
         return ""
 
 
+def _signal_process(p: subprocess.Popen) -> None:
+    """Ctrl-C at the process ``p`` alone."""
+    p.send_signal(signal.SIGINT)
+
+
+def _terminate_process_group(p: subprocess.Popen) -> None:
+    """SIGTERM at ``p``'s whole process group, as ``timeout`` or a job scheduler sends it."""
+    os.killpg(p.pid, signal.SIGTERM)
+
+
 @linux_only
-def test_ctrl_c_while_native_code_holds_the_interpreter_ends_the_run_and_keeps_finished_results(looming_npy,
-                                                                                                tmp_path):
+@pytest.mark.parametrize("interrupt", [_signal_process, _terminate_process_group], ids=["ctrl-c", "group-sigterm"])
+def test_an_interrupt_while_native_code_holds_the_interpreter_ends_the_run_and_keeps_finished_results(
+        looming_npy, tmp_path, interrupt):
     stall = tmp_path / "stall.npy"  # stands for an input whose kernels compile: see fault_tasks
     shutil.copy(looming_npy, stall)
     out = tmp_path / "o"
     code = "import fault_tasks\nfault_tasks.main_run_with_native_stall()\n"
     p = subprocess.Popen([sys.executable, "-c", code, str(looming_npy), str(stall), "--backend", "numpy",
-                          "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+                          "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV,
+                         start_new_session=True)  # its own process group
     try:
         lines = _read_until(p.stdout, "stalling")
         assert lines and "stalling" in lines[-1], "".join(lines) + p.stderr.read()
@@ -802,13 +814,13 @@ def test_ctrl_c_while_native_code_holds_the_interpreter_ends_the_run_and_keeps_f
         while "futex" not in _wchan(p.pid) and time.monotonic() < deadline:  # until it waits in native code
             time.sleep(0.05)
         assert "futex" in _wchan(p.pid)
-        p.send_signal(signal.SIGINT)
+        interrupt(p)
         rc = p.wait(timeout=30)  # the stall never ends
     finally:
         p.kill()
         p.wait()
     err = p.stderr.read()
-    assert rc != 0 and "Traceback" not in err
+    assert rc != 0 and "Traceback" not in err and "Exception ignored" not in err
     assert "interrupted while native code (a kernel compile) holds the interpreter" in err
     assert (out / "looming.cdnf.csv").read_bytes() == finished
     assert not (out / "stall.cdnf.csv").exists()
@@ -850,6 +862,36 @@ def test_sigterm_stops_a_parallel_batch_run_like_ctrl_c(command, small_dataset, 
     assert "leaked semaphore" not in err and "resource_tracker" not in err
     assert not (out / ".cdnf_ti.lock").exists()
     assert not list(out.rglob("*.tmp*"))
+
+
+#: A batch whose SIGTERM lands while ``spawn`` starts a worker: after the child is launched and before it has
+#: been sent its start-up data (the race that once left a child printing "Ran out of input").
+_SIGNAL_DURING_SPAWN = r"""
+import multiprocessing.util, os, signal, sys
+from cdnf_ti.experiments import parallel
+from fault_tasks import SLOW_TASK_S, sleep_then_pid
+launch = multiprocessing.util.spawnv_passfds
+def launch_then_signal(path, args, passfds):
+    pid = launch(path, args, passfds)
+    if any("spawn_main" in str(a) for a in args):  # a worker, not the resource tracker
+        os.kill(os.getpid(), signal.SIGTERM)
+    return pid
+multiprocessing.util.spawnv_passfds = launch_then_signal
+parallel.handle_sigterm_as_interrupt()
+try:
+    list(parallel.map_tasks(sleep_then_pid, [SLOW_TASK_S] * 2, workers=2, arch=None))
+except KeyboardInterrupt:
+    print("interrupted", file=sys.stderr)
+    sys.exit(130)
+"""
+
+
+@linux_only
+def test_sigterm_while_a_worker_is_being_spawned_stops_that_worker_too():
+    p = subprocess.run([sys.executable, "-c", _SIGNAL_DURING_SPAWN], capture_output=True, text=True, env=ENV,
+                       timeout=120)  # stderr is read to its end: until every child that shares it has ended
+    assert p.returncode == 130, p.stderr
+    assert p.stderr.strip() == "interrupted"  # no traceback from a half-started worker
 
 
 def test_second_signal_during_the_clean_stop_of_live_record_leaves_a_playable_recording(tmp_path, monkeypatch):

@@ -281,7 +281,10 @@ INTERRUPT_GRACE_S = 1.5
 #: The watchdog process's code (:func:`watch_interrupts`); it runs with ``python -S`` and imports only built-ins.
 _WATCHDOG = r"""
 import os, select, signal, sys, time
-signal.signal(signal.SIGINT, signal.SIG_IGN)  # a terminal's Ctrl-C reaches the whole process group
+# a terminal's Ctrl-C, and a SIGTERM sent to the process group (`timeout`, a job scheduler), reach this
+# process too: it outlives them, to end the program if that is held, and ends when the program does
+signal.signal(signal.SIGINT, signal.SIG_IGN)
+signal.signal(signal.SIGTERM, signal.SIG_IGN)
 sig_fd, ack_fd, parent, grace = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4])
 while True:
     got = os.read(sig_fd, 64)
@@ -364,10 +367,46 @@ def watch_interrupts(grace_s: float = INTERRUPT_GRACE_S) -> bool:
     return True
 
 
+#: While a worker process is being started (:func:`_interrupts_deferred`): the signals that came meanwhile.
+_DEFERRED: list[int] | None = None
+
+
+@contextlib.contextmanager
+def _interrupts_deferred() -> Iterator[None]:
+    """Hold a first Ctrl-C or SIGTERM until the block ends, then raise it (KeyboardInterrupt).
+
+    ``ProcessPoolExecutor.submit`` may start a worker: ``spawn`` launches the child, then writes it its
+    start-up data through a pipe, and only then lists it among the pool's processes. An interrupt that
+    landed in between left a child the pool did not know of, and that child, reading an unfinished
+    pipe, printed multiprocessing's "Ran out of input" traceback. Held until ``submit`` returns, the
+    interrupt finds every started worker listed, and :func:`_stop_pool` stops it. A second signal
+    still ends the process at once.
+    """
+    global _DEFERRED
+    if _DEFERRED is not None or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    _DEFERRED = []
+    try:
+        yield
+    finally:
+        pending, _DEFERRED = _DEFERRED, None
+        if pending:
+            raise KeyboardInterrupt
+
+
+def _raise_interrupt(signum: int) -> None:
+    """A Python signal handler's last step: KeyboardInterrupt now, or at the end of :func:`_interrupts_deferred`."""
+    if _DEFERRED is not None:
+        _DEFERRED.append(signum)
+        return
+    raise KeyboardInterrupt
+
+
 def _interrupt(signum, frame) -> None:
     """Ctrl-C under :func:`watch_interrupts`: Python's own behaviour (KeyboardInterrupt), acknowledged."""
     acknowledge_signal()
-    raise KeyboardInterrupt
+    _raise_interrupt(signum)
 
 
 def _terminate(signum, frame) -> None:
@@ -378,7 +417,7 @@ def _terminate(signum, frame) -> None:
     signal.signal(signal.SIGTERM, _exit_now)
     if _EXIT_ON_SECOND_INTERRUPT:
         signal.signal(signal.SIGINT, _exit_now)
-    raise KeyboardInterrupt
+    _raise_interrupt(signum)
 
 
 def handle_sigterm_as_interrupt() -> bool:
@@ -420,7 +459,7 @@ def _first_interrupt(signum, frame) -> None:
     """First Ctrl-C: arm :func:`_exit_now` for a second one, then stop the run (KeyboardInterrupt)."""
     acknowledge_signal()
     signal.signal(signal.SIGINT, _exit_now)
-    raise KeyboardInterrupt
+    _raise_interrupt(signum)
 
 
 #: Set by the command line (:func:`cdnf_ti.run.main`): after a first Ctrl-C the process is on its way
@@ -504,12 +543,14 @@ def _local(fn, tasks, workers, arch, rep, retries=1) -> Iterator[tuple[int, Any]
                 if not inflight:
                     i = retry.popleft()
                     rep.starting(i)
-                    inflight[ex.submit(fn, tasks[i])] = i
+                    with _interrupts_deferred():  # submit may start a worker
+                        inflight[ex.submit(fn, tasks[i])] = i
             else:
                 while todo and len(inflight) < workers:
                     i = todo.popleft()
                     rep.starting(i)
-                    inflight[ex.submit(fn, tasks[i])] = i
+                    with _interrupts_deferred():
+                        inflight[ex.submit(fn, tasks[i])] = i
             done, _ = wait(inflight, return_when=FIRST_COMPLETED)
             if any(isinstance(f.exception(), BrokenProcessPool) for f in done):
                 # a worker died: every task in flight fails with it; collect them all
