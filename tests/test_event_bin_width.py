@@ -59,6 +59,7 @@ def test_the_bin_width_hook_is_documented_with_its_unit_and_its_default():
     doc = Model.event_bin_ms.__doc__
     assert "ms" in doc and "None" in doc and "--bin-ms" in doc
     assert Model.event_bin_ms() is None
+    assert "event_bin_ms" in (REPO / "docs" / "EVENTS.md").read_text(encoding="utf-8")
 
 
 def test_a_model_without_a_width_of_its_own_bins_at_the_default():
