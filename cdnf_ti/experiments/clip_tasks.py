@@ -367,11 +367,13 @@ def batch_bin_ms(models: Sequence[str], params: dict | None = None, bin_ms: floa
     """The one width, ms, at which a batch run bins its event recordings for all its models.
 
     A batch scores every model against one set of labels per clip, so its models read a recording's
-    bins at one width: ``bin_ms`` (``--bin-ms``) when given, else the models' own width
-    (:func:`~cdnf_ti.models.base.bin_ms_for`) when they share one, else None (they differ;
-    :func:`check_event_bins` refuses that when a clip is an event recording).
+    bins at one width: ``bin_ms`` (``--bin-ms``) when given, else the own width
+    (:func:`~cdnf_ti.models.base.bin_ms_for`) of the models that take events (of every model when
+    none does) when they share one, else None (they differ; :func:`check_event_bins` refuses that
+    when a clip is an event recording).
     """
-    widths = {bin_ms_for(get_model_class(m), (params or {}).get(m), bin_ms) for m in models}
+    readers = [m for m in models if get_model_class(m).takes_events] or list(models)
+    widths = {bin_ms_for(get_model_class(m), (params or {}).get(m), bin_ms) for m in readers}
     return widths.pop() if len(widths) == 1 else None
 
 
@@ -408,7 +410,8 @@ def check_event_bins(labels: Sequence[ClipLabel], files: dict[str, str | os.Path
     if not recordings or bin_ms is not None:
         return DEFAULT_BIN_MS if width is None else width
     if width is None:
-        own = ", ".join(f"{m} {bin_ms_for(get_model_class(m), (params or {}).get(m)):.4g} ms" for m in models)
+        own = ", ".join(f"{m} {bin_ms_for(get_model_class(m), (params or {}).get(m)):.4g} ms" for m in models
+                        if get_model_class(m).takes_events)
         raise UserError(f"the models bin event recordings at different widths ({own}), and a batch run scores every "
                         "model against one set of labels per clip: give --bin-ms MS to bin them all at one width")
     in_bins = [lab.clip for lab in recordings
