@@ -18,6 +18,7 @@ import pytest
 
 from cdnf_ti.events import open_event_source
 from cdnf_ti.events.binning import DEFAULT_BIN_MS
+from cdnf_ti.experiments.clip_tasks import batch_bin_ms
 from cdnf_ti.models import Model, get_model_class
 from cdnf_ti.models.base import Trace, bin_ms_for
 from cdnf_ti.models.event_looming import EventLooming, EventLoomingParams
@@ -178,3 +179,9 @@ def test_windows_in_bins_are_refused_at_a_model_s_own_width_other_than_the_defau
     err = capsys.readouterr().err
     assert err.startswith(f"error: {data / 'labels.csv'}: ") and err.count("\n") == 1 and "window_start_s" in err
     assert dataset(data, out, "--model", "event_looming", "--bin-ms", "10") == 0
+
+
+def test_a_batch_takes_the_width_of_the_models_that_take_events():
+    assert batch_bin_ms(["event_looming", "olgmd"]) == 10.0  # oLGMD reads no recording: its width is moot
+    assert batch_bin_ms(["cdnf", "event_looming"]) is None
+    assert batch_bin_ms(["cdnf", "event_looming"], None, 20.0) == 20.0
