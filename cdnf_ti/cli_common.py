@@ -49,7 +49,7 @@ from pathlib import Path
 from typing import Sequence
 
 from .errors import UserError
-from .events.binning import DEFAULT_BIN_MS, DEFAULT_EVENT_THRESHOLD, DEFAULT_MAX_GAP_S, DEFAULT_MAX_SPAN_S
+from .events.binning import DEFAULT_EVENT_THRESHOLD, DEFAULT_MAX_GAP_S, DEFAULT_MAX_SPAN_S
 from .events.readers import parse_sensor_size
 from .limits import MAX_DROPS
 from .models import MODELS, get_model_class
@@ -135,9 +135,10 @@ def add_event_options(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--sensor-size", type=sensor_size_arg, default=None, metavar="WxH",
                     help="sensor size of event recordings (default: the file's header; else the smallest that "
                          "holds every event)")
-    ap.add_argument("--bin-ms", type=positive_float, default=DEFAULT_BIN_MS,
-                    help="events are binned into frames this long, ms (default: 1000/30 = 33.333..., one 30 fps "
-                         "frame)")
+    ap.add_argument("--bin-ms", type=positive_float, default=None, metavar="MS",
+                    help="events are binned into frames this long, ms, for every model (default: each model's own "
+                         "width, its time step where it has one, e.g. event_looming's dt of 10 ms; else 1000/30 = "
+                         "33.333..., one 30 fps frame)")
     ap.add_argument("--event-threshold", type=positive_float, default=DEFAULT_EVENT_THRESHOLD, metavar="C",
                     help="the sensor's log-contrast threshold C: n events at a pixel in a bin give the models a "
                          "contrast min(1, n C) (default: %(default)s); for 'events VIDEO' the emulated threshold")
@@ -151,9 +152,11 @@ def add_event_options(ap: argparse.ArgumentParser) -> None:
 
 def event_options_of(args: argparse.Namespace) -> dict:
     """``{"sensor_size", "bin_ms", "event_threshold", "max_gap_s", "max_span_s"}`` from the options of
-    :func:`add_event_options` (the defaults where the command has none)."""
+    :func:`add_event_options` (the defaults where the command has none; ``bin_ms`` None: not given, each
+    model bins at its own width, :func:`cdnf_ti.models.base.bin_ms_for`)."""
+    bin_ms = getattr(args, "bin_ms", None)
     return {"sensor_size": getattr(args, "sensor_size", None),
-            "bin_ms": float(getattr(args, "bin_ms", DEFAULT_BIN_MS)),
+            "bin_ms": None if bin_ms is None else float(bin_ms),
             "event_threshold": float(getattr(args, "event_threshold", DEFAULT_EVENT_THRESHOLD)),
             "max_gap_s": float(getattr(args, "max_gap_s", DEFAULT_MAX_GAP_S)),
             "max_span_s": float(getattr(args, "max_span_s", DEFAULT_MAX_SPAN_S))}
@@ -164,7 +167,7 @@ def given_event_options(args: argparse.Namespace) -> list[str]:
     input is an event recording."""
     opts = event_options_of(args)
     return [o for o, changed in (("--sensor-size", opts["sensor_size"] is not None),
-                                 ("--bin-ms", opts["bin_ms"] != DEFAULT_BIN_MS),
+                                 ("--bin-ms", opts["bin_ms"] is not None),
                                  ("--event-threshold", opts["event_threshold"] != DEFAULT_EVENT_THRESHOLD),
                                  ("--max-gap-s", opts["max_gap_s"] != DEFAULT_MAX_GAP_S),
                                  ("--max-span-s", opts["max_span_s"] != DEFAULT_MAX_SPAN_S))

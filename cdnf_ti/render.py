@@ -62,7 +62,7 @@ from .frames import iter_grey, to_grey
 from .inputs import resolve_input
 from .limits import check_frame_size
 from .models import create_model, get_model_class
-from .models.base import NotConvergedWarning
+from .models.base import NotConvergedWarning, bin_ms_for
 from .paths import inside
 from .stimuli.rain import RainParams, RainyFrames
 from .video import codec_for, write_video
@@ -437,7 +437,8 @@ def render_video(source: str | Path, model_name: str, out: str | Path, params: A
     second draws. ``fps``/``color_order`` are how a file is read; ``rain`` (a
     :class:`~cdnf_ti.stimuli.rain.RainParams`) adds the same synthetic rain (seed ``rain_seed``)
     in both passes. An event recording is binned as ``events`` says (``sensor_size``, ``bin_ms``,
-    ``event_threshold``: :func:`cdnf_ti.cli_common.event_options_of`), one movie frame per bin.
+    ``event_threshold``: :func:`cdnf_ti.cli_common.event_options_of`), one movie frame per bin; without
+    a ``bin_ms`` at the model's own width (:func:`~cdnf_ti.models.base.bin_ms_for`).
 
     Raises
     ------
@@ -448,6 +449,9 @@ def render_video(source: str | Path, model_name: str, out: str | Path, params: A
         smaller than the widest kernel.
     """
     codec_for(out)  # a bad suffix fails before any work
+    if is_event_file(source):  # binned at the model's width (--bin-ms when given), as `run` bins it for the model
+        events = dict(events or {})
+        events["bin_ms"] = bin_ms_for(get_model_class(model_name), params, events.get("bin_ms"))
     src = open_render_input(source, fps, color_order, events)
     is_events = isinstance(src, EventSource)
     if is_events and rain is not None:
@@ -488,12 +492,13 @@ def render_video(source: str | Path, model_name: str, out: str | Path, params: A
 def open_render_input(source: str | Path, fps: float | None = None, color_order: str = "bgr",
                       events: dict | None = None, quiet: bool = False) -> Any:
     """The input of a movie: an :class:`~cdnf_ti.events.source.EventSource` for an event recording
-    (binned as ``events`` says), else a frame source (:func:`~cdnf_ti.inputs.resolve_input`)."""
+    (binned as ``events`` says; no ``bin_ms``: the default width), else a frame source
+    (:func:`~cdnf_ti.inputs.resolve_input`)."""
     if is_event_file(source):
         ev = events or {}
         limits = {k: ev[k] for k in ("max_gap_s", "max_span_s") if k in ev}  # --max-gap-s, --max-span-s
-        return open_event_source(source, ev.get("sensor_size"), ev.get("bin_ms", DEFAULT_BIN_MS), quiet=quiet,
-                                 **limits)
+        width = DEFAULT_BIN_MS if ev.get("bin_ms") is None else ev["bin_ms"]
+        return open_event_source(source, ev.get("sensor_size"), width, quiet=quiet, **limits)
     return resolve_input(source, fps=fps, color_order=color_order)
 
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import csv
+import dataclasses
 import importlib
 import io
 import math
@@ -64,6 +65,7 @@ from .cli_common import (
     unique_names as unique_names,
 )
 from .errors import InputError, UserError
+from .events.binning import DEFAULT_BIN_MS
 from .events.readers import is_event_file
 from .events.source import EventSource, open_event_source
 from .experiments.parallel import (
@@ -76,7 +78,7 @@ from .frames import IMAGE_EXTENSIONS, iter_grey
 from .inputs import resolve_input
 from .limits import check_drops, check_frame_size
 from .models import create_model, get_model_class
-from .models.base import NotConvergedWarning, run_models
+from .models.base import NotConvergedWarning, bin_ms_for, run_models
 from .paths import inside
 from .stimuli.rain import RainParams, RainyFrames
 from .taichi_runtime import lanes_override
@@ -159,7 +161,8 @@ def _run_videos(args, models: list[str], params: dict, out: Path, write_text) ->
             if is_event_file(path):
                 if rain_params is not None:
                     raise InputError(path, "is an event recording; --rain applies to frames only")
-                src = open_event_source(path, args.sensor_size, args.bin_ms, max_gap_s=args.max_gap_s,
+                width = DEFAULT_BIN_MS if args.bin_ms is None else args.bin_ms  # each model's: input_passes
+                src = open_event_source(path, args.sensor_size, width, max_gap_s=args.max_gap_s,
                                         max_span_s=args.max_span_s)
             else:
                 src = resolve_input(path, fps=args.fps, color_order=args.color_order)
@@ -208,32 +211,42 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
         if skipped:  # 'all' means every model that takes events
             print(f"note: {path}: left out of --model all (no event input): {', '.join(skipped)}", file=sys.stderr)
             models = [name for name in models if name not in skipped]
-    instances = [create_model(name, params[name], backend=args.backend, arch=args.arch, fps=src.fps)
-                 for name in models]
     rain = None
-    errors: list = []
     label = clip if condition == "clean" else f"{clip} ({condition})"
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NotConvergedWarning)  # reported per line below
-            events = isinstance(src, EventSource)
-            frames = src.contrast(args.event_threshold) if events else iter_grey(src)
-            if rain_params is not None:
-                rain = RainyFrames(frames, rain_params, seed=rain_seed)
-                frames = iter(rain)
-            # one pass over the input: each frame is decoded (and rained on) once for all models
-            traces = run_models(instances, frames, total=src.n_frames, errors=errors,
-                                progress=False if args.no_progress else f"{label} [{', '.join(models)}]")
-    except InputError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return [_error_row(index, path, clip, ",".join(models), condition, e.problem)], 0
-    if events:
-        for problem in src.report.problems():
-            print(f"warning: {path}: {problem}", file=sys.stderr)
+    instances: list = [None] * len(models)
+    traces: list = [None] * len(models)
+    errors: list = [None] * len(models)
+    sources: list = [src] * len(models)  # the source each model read: its recording's bins at its width
+    events = isinstance(src, EventSource)
+    problems: list[str] = []
+    for source, idx in input_passes(src, models, params, args.bin_ms):
+        names = [models[i] for i in idx]
+        readers = [create_model(models[i], params[models[i]], backend=args.backend, arch=args.arch, fps=source.fps)
+                   for i in idx]
+        errs: list = []
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", NotConvergedWarning)  # reported per line below
+                frames = source.contrast(args.event_threshold) if events else iter_grey(source)
+                if rain_params is not None:
+                    rain = RainyFrames(frames, rain_params, seed=rain_seed)
+                    frames = iter(rain)
+                # one pass over the input: each frame is decoded (and rained on) once for all its models
+                bar = f"{label} [{', '.join(names)}]" + (f" ({source.bin_ms:.4g} ms bins)" if events else "")
+                done = run_models(readers, frames, total=source.n_frames, errors=errs,
+                                  progress=False if args.no_progress else bar)
+        except InputError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return [_error_row(index, path, clip, ",".join(models), condition, e.problem)], 0
+        for k, i in enumerate(idx):
+            instances[i], traces[i], errors[i], sources[i] = readers[k], done[k], errs[k], source
+        if events:
+            problems += [p for p in source.report.problems() if p not in problems]
+    for problem in problems:
+        print(f"warning: {path}: {problem}", file=sys.stderr)
     rows = []
     ran = 0
-    settings = run_settings(args, path, src, rain_params, rain_seed)
-    for name, model, trace, err in zip(models, instances, traces, errors):
+    for name, model, trace, err, source in zip(models, instances, traces, errors, sources):
         if err is not None:
             msg = str(err) if isinstance(err, UserError) else f"{type(err).__name__}: {err}"
             print(f"error: {path} [{name}]: {msg}".splitlines()[0], file=sys.stderr)
@@ -246,7 +259,8 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
         ran += 1
         trace_name = trace_file_name(clip, name, condition)
         trace.to_csv(inside(out, trace_name))
-        alert = alert_summary(trace, model.alert_rule(), src.fps)
+        settings = run_settings(args, path, source, rain_params, rain_seed)
+        alert = alert_summary(trace, model.alert_rule(), source.fps)
         fa = alert.first_alert
         fa_txt = f"{fa} ({alert.first_alert_s:.2f} s)" if fa is not None else "none"
         unconv = int((~trace.converged).sum())
@@ -264,7 +278,7 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
               f"{alert.text()}{extra}; {fps_txt}{note}")
         rows.append({"_i": index, "input": str(path), "clip": clip, "model": name, "condition": condition,
                      "params": params_text(model), "settings": settings_text(settings), "trace": trace_name,
-                     "frames": trace.n_frames, "video_fps": f"{src.fps:g}",
+                     "frames": trace.n_frames, "video_fps": f"{source.fps:g}",
                      "first_alert": "" if fa is None else fa,
                      "first_alert_s": "" if alert.first_alert_s is None else f"{alert.first_alert_s:.4f}",
                      "alert_rule": alert.rule, "alert_peak": f"{alert.peak:.6g}", "alert_level": f"{alert.level:g}",
@@ -274,6 +288,21 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
                      "status": "ok" if not unconv else "unconverged",
                      "rain_snr_db": f"{rain.snr_db:.4f}" if rain is not None else ""})
     return rows, ran
+
+
+def input_passes(src, models: Sequence[str], params: dict, bin_ms: float | None) -> list[tuple[object, list[int]]]:
+    """The passes ``run`` makes over one input: ``(source, indices of the models that read it)``.
+
+    A video is one pass for every model. An event recording is binned once per distinct width
+    (:func:`~cdnf_ti.models.base.bin_ms_for`: ``bin_ms``, ``--bin-ms``, when given, else each
+    model's own), in the order the models first name it; models of one width share a pass.
+    """
+    if not isinstance(src, EventSource):
+        return [(src, list(range(len(models))))]
+    groups: dict[float, list[int]] = {}
+    for i, name in enumerate(models):
+        groups.setdefault(bin_ms_for(get_model_class(name), params.get(name), bin_ms), []).append(i)
+    return [(dataclasses.replace(src, bin_ms=width), idx) for width, idx in groups.items()]
 
 
 #: Columns of ``run``'s summary.csv, in order (see the README's table of CSV columns).
@@ -305,7 +334,8 @@ def run_settings(args, path, src, rain_params, rain_seed: int) -> dict[str, str]
     With the clip, model, condition and parameters they are the run's identity (docs/EXPERIMENTS.md,
     "Run identity"): the engine (``backend``); for frames the frame rate (``fps``: ``--fps`` or
     the video's own) and, for a ``.npy`` array, ``color_order``; for an event recording
-    ``bin_ms``, ``event_threshold`` and ``sensor_size`` (WxH, given or found); under rain the
+    ``bin_ms`` (the width of the bins ``src`` gives: the model's, :func:`input_passes`),
+    ``event_threshold`` and ``sensor_size`` (WxH, given or found); under rain the
     droplets per frame (``rain_drops``, the default resolved for the frame size) and
     ``rain_seed``. Values are the settings in effect, not the options as typed.
     """

@@ -9,6 +9,7 @@ from event_encoders import encode_evt3, random_events, raw_header
 
 from cdnf_ti.events import open_event_source, open_events
 from cdnf_ti.models import MODELS
+from cdnf_ti.models.base import bin_ms_for
 from cdnf_ti.run import main
 
 STIM = "stim:dark_looming?size=48&duration=0.5"
@@ -78,8 +79,8 @@ def test_running_the_models_on_an_event_file_gives_one_trace_row_per_bin_and_its
     err = capsys.readouterr().err
     assert "error:" not in err
     assert f"warning: {f}: " in err and "outside the 32x48 sensor" in err
-    n_bins = sum(1 for _ in open_event_source(f, (32, 48)).counts())
     for name in [n for n, m in MODELS.items() if m.takes_events]:  # every model with an event input stage
+        n_bins = sum(1 for _ in open_event_source(f, (32, 48), bin_ms_for(MODELS[name])).counts())  # at its width
         with open(out / f"ev.{name}.csv", newline="") as fh:
             assert len(list(csv.DictReader(fh))) == n_bins, name
 

@@ -41,6 +41,7 @@ from ..frames import iter_grey
 from ..inputs import STIM_PREFIX, parse_stim_spec, resolve_input, stimulus_label
 from ..limits import check_frame_size
 from ..paths import inside
+from .binning import DEFAULT_BIN_MS
 from .emulator import EmulatorParams, emulate
 from .readers import is_event_file
 from .source import open_event_source
@@ -101,9 +102,10 @@ def _recordings(inputs: Sequence[str]) -> list[str]:
 
 def _info(args) -> int:
     ok = failed = 0
+    bin_ms = DEFAULT_BIN_MS if args.bin_ms is None else args.bin_ms  # no model: the project's default width
     for path in _recordings(args.inputs):
         try:
-            src = open_event_source(path, args.sensor_size, args.bin_ms, max_gap_s=args.max_gap_s,
+            src = open_event_source(path, args.sensor_size, bin_ms, max_gap_s=args.max_gap_s,
                                     max_span_s=args.max_span_s)
             check_frame_size(*src.shape, n_models=1, what=path, binning=True)  # as `run` would with one model
             n_bins = sum(1 for _ in src.counts())
@@ -117,7 +119,7 @@ def _info(args) -> int:
         span = (r.t_last - r.t_first) / 1e6 if r.n_events else 0.0
         on = 100.0 * r.n_on / r.n_events if r.n_events else 0.0
         print(f"{path}: {src.events.format}, {w}x{h} ({origin}), {r.n_events} events ({on:.1f}% ON), "
-              f"t {r.t_first}..{r.t_last} us ({span:.3f} s), {n_bins} bins of {args.bin_ms:.6g} ms")
+              f"t {r.t_first}..{r.t_last} us ({span:.3f} s), {n_bins} bins of {bin_ms:.6g} ms")
         for line in r.problems():
             print(f"warning: {path}: {line}", file=sys.stderr)
         ok += 1

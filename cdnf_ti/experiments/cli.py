@@ -123,7 +123,8 @@ def _skip_missing(args, folder: Path) -> None:
 
 def _note_event_options(args, folder: Path) -> None:
     """A ``note:`` for options that do not apply to the clips of ``folder``: event options without any
-    event recording, ``--fps``/``--color-order`` with event recordings only (their rate is 1000 / --bin-ms)."""
+    event recording, ``--fps``/``--color-order`` with event recordings only (their rate is 1000 / the bin
+    width: ``--bin-ms``, else the models')."""
     labels_path = Path(args.labels) if args.labels else folder / "labels.csv"
     try:
         labels = read_labels(labels_path)
@@ -136,8 +137,10 @@ def _note_event_options(args, folder: Path) -> None:
         note(f"{' and '.join(given)} change(s) nothing: no labelled clip in {folder} is an event recording")
     frame_opts = [o for o, d in (("--fps", args.fps is not None), ("--color-order", args.color_order != "bgr")) if d]
     if frame_opts and files and n_events == len(files):
+        rate = ("bins of the models' own width" if args.bin_ms is None
+                else f"bins of --bin-ms, {1000.0 / args.bin_ms:g} per second")
         note(f"{' and '.join(frame_opts)} change(s) nothing: every labelled clip in {folder} is an event recording "
-             f"(bins of --bin-ms, {1000.0 / args.bin_ms:g} per second)")
+             f"({rate})")
 
 
 def _dataset(args, folder: Path, out: Path) -> int:
@@ -275,7 +278,7 @@ def dataset_main(argv: Sequence[str]) -> int:
                     "figures. Rerunning with the same OUT skips finished work.")
     ap.add_argument("folder", metavar="DIR",
                     help="folder of videos and/or event recordings (docs/EVENTS.md: a recording's frames "
-                         "are its bins of --bin-ms, and its labels count bins)")
+                         "are its bins, of --bin-ms or else of the models' own width, and its labels count bins)")
     add_output_option(ap, default="cdnf_out/dataset")
     ap.add_argument("--render", action="store_true",
                     help="also write a field movie of each scored clip and model (OUT/movies/<clip>.<model>.mp4)")

@@ -2,8 +2,9 @@
 
 One unit of work (:class:`ClipTask`) decodes a clip once (and rains on it once)
 for several models; a clip that is an event recording (:func:`~cdnf_ti.events.readers.is_event_file`)
-is binned once instead (``--bin-ms``, ``--event-threshold``, ``--sensor-size``) and every model
-takes its bins through its ON/OFF input stage (:meth:`~cdnf_ti.models.base.Model.step_on_off`).
+is binned instead (``--event-threshold``, ``--sensor-size``), once per bin width (the task's ``bin_ms``:
+one for every model of a dataset run, :func:`batch_bin_ms`), and every model takes its bins through
+its ON/OFF input stage (:meth:`~cdnf_ti.models.base.Model.step_on_off`).
 Each (clip, model, condition) is one cache entry of
 :mod:`.tasks`, saved as ``<out>/traces/<condition>/<clip>.<model>.csv`` and its
 record ``.json`` beside it (:mod:`.layout`). A parameter sweep runs the same
@@ -34,7 +35,7 @@ from ..events.source import EventSource, open_event_source
 from ..frames import iter_grey, open_source
 from ..limits import check_frame_size
 from ..models import create_model, get_model_class
-from ..models.base import NotConvergedWarning, run_models
+from ..models.base import NotConvergedWarning, bin_ms_for, run_models
 from ..paths import inside
 from ..stimuli.rain import RainParams, RainyFrames
 from .labels import ClipLabel
@@ -298,7 +299,7 @@ def run_clips(clips: Sequence[tuple[str, str]], out: str | os.PathLike, models: 
               conditions: Sequence[str], seed: int = 0, workers: int | None = None, scheduler: Any = None,
               backend: str = "taichi", arch: str = "cpu", progress: bool = True, rain_params: dict | None = None,
               on_record: Callable[[dict], None] | None = None, params: dict | None = None, fps: float | None = None,
-              color_order: str = "bgr", sensor_size: tuple[int, int] | None = None, bin_ms: float = DEFAULT_BIN_MS,
+              color_order: str = "bgr", sensor_size: tuple[int, int] | None = None, bin_ms: float | None = None,
               event_threshold: float = DEFAULT_EVENT_THRESHOLD, max_gap_s: float = DEFAULT_MAX_GAP_S,
               max_span_s: float = DEFAULT_MAX_SPAN_S) -> tuple[dict[tuple[str, str, str], dict], CachedRun]:
     """Every clip x condition x model, reusing finished traces (the dataset engine).
@@ -314,7 +315,8 @@ def run_clips(clips: Sequence[tuple[str, str]], out: str | os.PathLike, models: 
         As :func:`cdnf_ti.experiments.dataset.run_dataset`.
     sensor_size, bin_ms, event_threshold, max_gap_s, max_span_s
         How the clips that are event recordings are binned (``--sensor-size``, ``--bin-ms``,
-        ``--event-threshold``, ``--max-gap-s``, ``--max-span-s``).
+        ``--event-threshold``, ``--max-gap-s``, ``--max-span-s``); ``bin_ms`` None: each model at its
+        own width (:func:`~cdnf_ti.models.base.bin_ms_for`), the models of one width sharing a pass.
     on_record : callable, optional
         Called in this process with each record computed now (after a ``warning:`` line on stderr
         for each problem found while binning an event recording).
@@ -331,13 +333,14 @@ def run_clips(clips: Sequence[tuple[str, str]], out: str | os.PathLike, models: 
                 keys.append((clip, m, cond))
                 tasks.append(ClipTask(clip, str(path), cond, (m,), str(out), seed, backend, arch, rain_params,
                                       params=params, fps=fps, color_order=color_order, sensor_size=sensor_size,
-                                      bin_ms=bin_ms, event_threshold=event_threshold, max_gap_s=max_gap_s,
+                                      bin_ms=bin_ms_for(get_model_class(m), (params or {}).get(m), bin_ms),
+                                      event_threshold=event_threshold, max_gap_s=max_gap_s,
                                       max_span_s=max_span_s))
 
     def plan(todo: list[int]) -> list[tuple[ClipTask, list[int]]]:
-        groups: dict[tuple[str, str], list[int]] = {}
-        for i in todo:
-            groups.setdefault((tasks[i].clip, tasks[i].condition), []).append(i)
+        groups: dict[tuple[str, str, float], list[int]] = {}
+        for i in todo:  # one pass per clip, condition and bin width (a video's width is unused)
+            groups.setdefault((tasks[i].clip, tasks[i].condition, tasks[i].bin_ms), []).append(i)
         return [(dataclasses.replace(tasks[ix[0]], models=tuple(tasks[i].models[0] for i in ix)), ix)
                 for ix in groups.values()]
 
@@ -358,6 +361,69 @@ def _arrived(record: dict, on_record: Callable[[dict], None] | None = None) -> N
         print(f"warning: {record.get('source', record.get('clip'))}: {line}", file=sys.stderr)
     if on_record is not None:
         on_record(record)
+
+
+def batch_bin_ms(models: Sequence[str], params: dict | None = None, bin_ms: float | None = None) -> float | None:
+    """The one width, ms, at which a batch run bins its event recordings for all its models.
+
+    A batch scores every model against one set of labels per clip, so its models read a recording's
+    bins at one width: ``bin_ms`` (``--bin-ms``) when given, else the own width
+    (:func:`~cdnf_ti.models.base.bin_ms_for`) of the models that take events (of every model when
+    none does) when they share one, else None (they differ; :func:`check_event_bins` refuses that
+    when a clip is an event recording).
+    """
+    readers = [m for m in models if get_model_class(m).takes_events] or list(models)
+    widths = {bin_ms_for(get_model_class(m), (params or {}).get(m), bin_ms) for m in readers}
+    return widths.pop() if len(widths) == 1 else None
+
+
+def check_event_bins(labels: Sequence[ClipLabel], files: dict[str, str | os.PathLike], models: Sequence[str],
+                     params: dict | None, bin_ms: float | None, labels_path: str | os.PathLike) -> float:
+    """The width a batch run bins its event recordings at (:func:`batch_bin_ms`), checked against its labels.
+
+    Parameters
+    ----------
+    labels : sequence of ClipLabel
+        The labels, their windows in frames at that width (:func:`~.labels.labels_in_frames`).
+    files : dict
+        Clip -> its file.
+    models, params, bin_ms :
+        The run's models, ``{model: parameter object}`` and ``--bin-ms`` (None: not given).
+    labels_path : path-like
+        The labels file, for messages.
+
+    Returns
+    -------
+    float
+        The width, ms (the default width when the models differ and no clip is a recording).
+
+    Raises
+    ------
+    UserError
+        The models bin at different widths and a clip is an event recording (give ``--bin-ms``).
+    InputError
+        A recording's window or contact is given in frames, which count bins of ``--bin-ms``, else of
+        the default width, while the models bin it at another width of their own.
+    """
+    width = batch_bin_ms(models, params, bin_ms)
+    recordings = [lab for lab in labels if lab.clip in files and is_event_file(files[lab.clip])]
+    if not recordings or bin_ms is not None:
+        return DEFAULT_BIN_MS if width is None else width
+    if width is None:
+        own = ", ".join(f"{m} {bin_ms_for(get_model_class(m), (params or {}).get(m)):.4g} ms" for m in models
+                        if get_model_class(m).takes_events)
+        raise UserError(f"the models bin event recordings at different widths ({own}), and a batch run scores every "
+                        "model against one set of labels per clip: give --bin-ms MS to bin them all at one width")
+    in_bins = [lab.clip for lab in recordings
+               if not lab.in_seconds and (lab.window_start is not None or lab.contact_frame is not None)]
+    if in_bins and width != DEFAULT_BIN_MS:
+        shown = ", ".join(in_bins[:5]) + (", ..." if len(in_bins) > 5 else "")
+        raise InputError(labels_path, f"the windows of {len(in_bins)} event recording(s) ({shown}) are in frames, "
+                                      f"which count bins of --bin-ms (default {DEFAULT_BIN_MS:.6g} ms), but "
+                                      f"{', '.join(models)} bin(s) them at {width:.4g} ms: give --bin-ms MS (the width "
+                                      "the labels count; every model then bins at it) or the windows in seconds "
+                                      "(window_start_s, window_end_s)")
+    return width
 
 
 def event_clips(files: dict[str, str | os.PathLike]) -> list[str]:
@@ -435,7 +501,8 @@ class SweepTask:
         How the clip is read (``--fps``, ``--color-order``).
     sensor_size, bin_ms, event_threshold, max_gap_s, max_span_s :
         How an event recording is binned (``--sensor-size``, ``--bin-ms``, ``--event-threshold``,
-        ``--max-gap-s``, ``--max-span-s``).
+        ``--max-gap-s``, ``--max-span-s``); ``bin_ms`` None: the model's own width with its default
+        parameters (:func:`~cdnf_ti.models.base.bin_ms_for`).
     """
 
     clip: str
@@ -452,7 +519,7 @@ class SweepTask:
     fps: float | None = None
     color_order: str = "bgr"
     sensor_size: tuple[int, int] | None = None
-    bin_ms: float = DEFAULT_BIN_MS
+    bin_ms: float | None = None
     event_threshold: float = DEFAULT_EVENT_THRESHOLD
     max_gap_s: float = DEFAULT_MAX_GAP_S
     max_span_s: float = DEFAULT_MAX_SPAN_S
@@ -463,7 +530,8 @@ class SweepTask:
         return ClipTask(self.clip, self.path, self.condition, (self.model,), str(setting_folder(self.out, self.key)),
                         self.seed, self.backend, self.arch, None, fps=self.fps, color_order=self.color_order,
                         setting=tuple(self.setting), downscale=float(self.downscale), key=self.key,
-                        sensor_size=self.sensor_size, bin_ms=self.bin_ms, event_threshold=self.event_threshold,
+                        sensor_size=self.sensor_size, bin_ms=bin_ms_for(get_model_class(self.model), None, self.bin_ms),
+                        event_threshold=self.event_threshold,
                         max_gap_s=self.max_gap_s, max_span_s=self.max_span_s)
 
 

@@ -30,6 +30,8 @@ from .benchmark_formats import read_benchmark
 from .clip_tasks import (
     ClipTask as ClipTask,  # re-exported: dataset.py was their home
     DatasetRun as DatasetRun,
+    batch_bin_ms,
+    check_event_bins,
     describe_clip_task as describe_task,
     frames_only_conditions,
     note_inferred_sensor_size,
@@ -97,7 +99,8 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
     folder : path-like
         Folder of videos and/or event recordings (:func:`~cdnf_ti.events.readers.is_event_file`).
         A recording is a clip whose frames are its bins: its labels count bins, bin ``k``
-        starting ``k * bin_ms / 1000`` s into the recording.
+        starting ``k * bin_ms / 1000`` s into the recording. Every model reads a recording at one
+        width (:func:`~.clip_tasks.check_event_bins`): ``--bin-ms``, else the models' own.
     labels_path : path-like or None
         Labels CSV (None: ``folder/labels.csv``).
     out : path-like
@@ -132,8 +135,9 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
         Run the clips whose video exists and leave out label rows that name a missing video
         (:func:`~cdnf_ti.experiments.labels.drop_missing`); by default a missing video is an error.
     events : dict, optional
-        How event recordings are binned: ``sensor_size``, ``bin_ms``, ``event_threshold``
-        (:func:`cdnf_ti.cli_common.event_options_of`; default: the defaults). Rain applies to
+        How event recordings are binned: ``sensor_size``, ``bin_ms`` (None or absent: the models'
+        own width), ``event_threshold`` (:func:`cdnf_ti.cli_common.event_options_of`; default: the
+        defaults). Rain applies to
         frames only (:func:`~.clip_tasks.frames_only_conditions`).
     fmt : {"labels", "nexar", "ccd", "dad", "dota"}
         The folder's layout: cdnf_ti's labels CSV, or a public benchmark's as distributed
@@ -144,9 +148,9 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
     Raises
     ------
     InputError
-        Bad labels file (before any work starts).
+        Bad labels file (before any work starts), or a recording's labels in bins of another width.
     UserError
-        Bad option.
+        Bad option, or models of different bin widths on event recordings without ``--bin-ms``.
     OutputError
         ``out`` cannot be created or written (before any work starts).
     """
@@ -154,24 +158,27 @@ def run_dataset(folder: str | os.PathLike, labels_path: str | os.PathLike | None
         raise UserError(f"--rain must be one of {', '.join(RAIN_CHOICES)}, got {rain!r}")
     folder = Path(folder)
     annotations = None
-    if fmt == "labels":
-        labels_path = Path(labels_path) if labels_path is not None else folder / "labels.csv"
-        labels, files = load_labels(labels_path, folder, fps, (events or {}).get("bin_ms"), skip_missing)
-    else:
-        annotations, labels, files, fps = benchmark_labels(fmt, folder, labels_path, split, skip_missing, fps)
-        labels_path = Path(labels_path) if labels_path is not None else folder
-        labels = labels_in_frames(labels, files, fps, (events or {}).get("bin_ms"), labels_path)
-    conditions = frames_only_conditions(files, RAIN_CHOICES[rain], folder)
-    note_inferred_sensor_size(files, (events or {}).get("sensor_size"))
     models = list(dict.fromkeys(models))
     if not models:
         raise UserError("no model named")
+    events = dict(events or {})
+    width = batch_bin_ms(models, params, events.get("bin_ms"))  # the labels' bins (None: the default width)
+    if fmt == "labels":
+        labels_path = Path(labels_path) if labels_path is not None else folder / "labels.csv"
+        labels, files = load_labels(labels_path, folder, fps, width, skip_missing)
+    else:
+        annotations, labels, files, fps = benchmark_labels(fmt, folder, labels_path, split, skip_missing, fps)
+        labels_path = Path(labels_path) if labels_path is not None else folder
+        labels = labels_in_frames(labels, files, fps, width, labels_path)
+    events["bin_ms"] = check_event_bins(labels, files, models, params, events.get("bin_ms"), labels_path)
+    conditions = frames_only_conditions(files, RAIN_CHOICES[rain], folder)
+    note_inferred_sensor_size(files, events.get("sensor_size"))
     out = prepare_output(out)  # before any work: a folder that cannot be written fails now
     files = {clip: Path(f).resolve() for clip, f in files.items()}  # workers may run elsewhere
     with output_lock(out), parallel.cleaned_up(out):
         return _run_locked(folder, labels_path, labels, files, out, models, conditions, padding, seed,
                            workers, scheduler, backend, arch, progress, figures, rain_params, on_record,
-                           dict(params=params, fps=fps, color_order=color_order, **(events or {})),
+                           dict(params=params, fps=fps, color_order=color_order, **events),
                            fmt, annotations)
 
 

@@ -45,6 +45,8 @@ from ..param_options import convert_value, field_kind
 from .clip_tasks import (
     ParamSweepRun as ParamSweepRun,  # re-exported: paramsweep.py was their home
     SweepTask as SweepTask,
+    batch_bin_ms,
+    check_event_bins,
     describe_sweep_task as describe_task,
     frames_only_conditions,
     note_inferred_sensor_size,
@@ -206,7 +208,8 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
         Leave out labelled clips whose video is missing (a note lists them); by default an error.
     events : dict, optional
         How the clips that are event recordings are binned: ``sensor_size``, ``bin_ms``,
-        ``event_threshold`` (as :func:`cdnf_ti.experiments.dataset.run_dataset`).
+        ``event_threshold`` (as :func:`cdnf_ti.experiments.dataset.run_dataset`; without ``bin_ms``
+        every setting at the model's own width with its default parameters).
 
     Raises
     ------
@@ -226,9 +229,12 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
     if not folder.is_dir():
         raise InputError(folder, "dataset folder not found")
     labels_path = Path(labels_path) if labels_path is not None else folder / "labels.csv"
-    labels, files = load_labels(labels_path, folder, fps, (events or {}).get("bin_ms"), skip_missing)
+    events = dict(events or {})
+    labels, files = load_labels(labels_path, folder, fps, batch_bin_ms([name], None, events.get("bin_ms")),
+                                skip_missing)
+    events["bin_ms"] = check_event_bins(labels, files, [name], None, events.get("bin_ms"), labels_path)
     conditions = frames_only_conditions(files, RAIN_CHOICES[rain], folder)
-    note_inferred_sensor_size(files, (events or {}).get("sensor_size"))
+    note_inferred_sensor_size(files, events.get("sensor_size"))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_json(out / "grid.json", {"model": name, "params": {a.name: list(a.values) for a in axes},
@@ -236,7 +242,7 @@ def run_param_sweep(folder: str | os.PathLike, labels_path: str | os.PathLike | 
                                           "downscale": downscale, "dataset": str(folder),
                                           "labels": str(labels_path)})
     tasks = [SweepTask(lab.clip, str(Path(files[lab.clip]).resolve()), name, tuple(s.items()), setting_key(s),
-                       cond, str(out), seed, backend, arch, float(downscale), fps, color_order, **(events or {}))
+                       cond, str(out), seed, backend, arch, float(downscale), fps, color_order, **events)
              for s in settings for cond in conditions for lab in labels]
     with cleaned_up(out):  # stale temporary files removed; Ctrl-C and SIGTERM stop the workers cleanly
         done = run_sweep(tasks, workers=workers, scheduler=scheduler, arch=arch,

@@ -37,7 +37,7 @@ from ..errors import InputError, UserError
 from ..models import get_model_class
 from ..models.base import Trace
 from ..param_options import convert_value, field_kind
-from .clip_tasks import SweepTask, run_sweep, setting_folder
+from .clip_tasks import SweepTask, batch_bin_ms, check_event_bins, run_sweep, setting_folder
 from .clipscores import bootstrap_accuracy, choose_level, correctness_matrix, fold_assignment
 from .htmlreport import markdown_table
 from .labels import drop_missing, labels_in_frames, read_labels, validate_dataset
@@ -178,7 +178,9 @@ def run_tune(folder: str | os.PathLike, labels_path: str | os.PathLike | None, o
     if skip_missing:
         labels, _ = drop_missing(labels, folder)
     files = validate_dataset(labels, folder, labels_path)
-    labels = labels_in_frames(labels, files, fps, (events or {}).get("bin_ms"), labels_path)
+    events = dict(events or {})
+    labels = labels_in_frames(labels, files, fps, batch_bin_ms([name], None, events.get("bin_ms")), labels_path)
+    events["bin_ms"] = check_event_bins(labels, files, [name], None, events.get("bin_ms"), labels_path)
     labs = {lab.clip: lab for lab in labels}
     clips = [lab.clip for lab in labels]
     if len(clips) < 3:
@@ -192,7 +194,7 @@ def run_tune(folder: str | os.PathLike, labels_path: str | os.PathLike | None, o
     def run_setting(setting: dict, on: Sequence[str]) -> str:
         key = setting_key(setting)
         tasks = [SweepTask(c, str(Path(files[c]).resolve()), name, tuple(setting.items()), key, cond, str(out), seed,
-                           backend, arch, float(downscale), fps, color_order, **(events or {})) for c in on]
+                           backend, arch, float(downscale), fps, color_order, **events) for c in on]
         done = run_sweep(tasks, workers=workers, scheduler=scheduler, arch=arch,
                          progress=f"tune {name} {key}" if progress else False)
         counts["ran"] += done.ran

@@ -22,6 +22,7 @@ from tqdm import tqdm
 from ..alert_rule import AlertRule
 from ..atomic import atomic_write_text
 from ..errors import UserError
+from ..events.binning import DEFAULT_BIN_MS
 from ..frames import to_grey
 
 
@@ -300,6 +301,27 @@ class Model:
         """Default value of the swept quantity (None: unknown)."""
         return None
 
+    @classmethod
+    def event_bin_ms(cls, params: Any = None) -> float | None:
+        """The bin width, ms, at which the model takes an event recording when ``--bin-ms`` is not given.
+
+        A model whose equations have their own time step states it here (the event-based looming
+        detector: its ``dt``, the bins its authors feed it), so that a recording reaches it at that
+        step; :func:`bin_ms_for` resolves the width a run uses.
+
+        Parameters
+        ----------
+        params : the model's parameter object, optional
+            The parameters the model runs with (None: its defaults); the width may depend on them.
+
+        Returns
+        -------
+        float or None
+            Bin width in ms (> 0), or None (the default): no preference, the project's default
+            width :data:`~cdnf_ti.events.binning.DEFAULT_BIN_MS` (1000/30 ms, one 30 fps frame).
+        """
+        return None
+
     def __init__(self, params: Any = None, *, backend: str = "taichi", arch: str = "cpu", fps: float = 30.0,
                  compiler: str | None = None):
         if backend not in self.BACKENDS:
@@ -516,6 +538,22 @@ class Model:
             Number of frames, for the progress bar.
         """
         return run_models([self], frames, progress=progress, total=total)[0]
+
+
+def bin_ms_for(model: "type[Model] | Model", params: Any = None, bin_ms: float | None = None) -> float:
+    """The bin width, ms, at which ``model`` (a class, or an instance: its parameters unless ``params``) takes
+    an event recording.
+
+    ``bin_ms`` (``--bin-ms``) when given, for every model; else the model's own
+    (:meth:`Model.event_bin_ms`); else :data:`~cdnf_ti.events.binning.DEFAULT_BIN_MS`. Every command
+    that bins a recording for a model (``run``, ``render``, the batch runs) asks here.
+    """
+    if bin_ms is not None:
+        return float(bin_ms)
+    if params is None and isinstance(model, Model):
+        params = model.params
+    own = model.event_bin_ms(params)
+    return DEFAULT_BIN_MS if own is None else float(own)
 
 
 def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bool | str = False,

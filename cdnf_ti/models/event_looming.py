@@ -144,6 +144,8 @@ class EventLooming(Model):
     #: Use the fast (lane) layout where it applies; ``False``: the pixel layout (same equations).
     fast: bool = True
     takes_events = True
+    #: Bins of a recording are ``dt`` long, as in their sequences (PyTorch ``DT`` 10 ms, GeNN ``DT_MS`` 1 ms).
+    event_bin_ms = classmethod(lambda cls, params=None: (params or cls.params_type()).values()["dt"])
 
     #: The alert is ``output > 0`` (their classification ``outputs > 0``).
     threshold = 0.0
