@@ -164,13 +164,15 @@ def test_the_dataset_fingerprint_changes_with_the_width(recording, tmp_path, cap
     assert json.loads(record.read_text())["fingerprint"]["bin_ms"] == 20.0
 
 
-def test_a_dataset_of_models_with_different_widths_needs_bin_ms(recording, tmp_path, capsys):
+def test_a_dataset_of_models_with_different_widths_bins_all_at_the_default_with_a_note(recording, tmp_path, capsys):
     data, out = labelled(recording, tmp_path, SECONDS), tmp_path / "out"
-    assert dataset(data, out, "--model", "cdnf,event_looming") == 2
+    assert dataset(data, out, "--model", "cdnf,event_looming") == 0
     err = capsys.readouterr().err
-    assert err.startswith("error: ") and err.count("\n") == 1 and "--bin-ms" in err and "event_looming 10 ms" in err
-    assert not (out / "traces").exists()
-    assert dataset(data, out, "--model", "cdnf,event_looming", "--bin-ms", "20") == 0
+    assert "note: " in err and "event_looming 10 ms" in err and "--bin-ms" in err
+    with open(out / "results.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert {r["model"] for r in rows} == {"cdnf", "event_looming"}
+    assert all(int(r["frames"]) == bins_in(recording, 1000.0 / 30.0) for r in rows)
 
 
 def test_windows_in_bins_are_refused_at_a_model_s_own_width_other_than_the_default(recording, tmp_path, capsys):

@@ -369,8 +369,8 @@ def batch_bin_ms(models: Sequence[str], params: dict | None = None, bin_ms: floa
     A batch scores every model against one set of labels per clip, so its models read a recording's
     bins at one width: ``bin_ms`` (``--bin-ms``) when given, else the own width
     (:func:`~cdnf_ti.models.base.bin_ms_for`) of the models that take events (of every model when
-    none does) when they share one, else None (they differ; :func:`check_event_bins` refuses that
-    when a clip is an event recording).
+    none does) when they share one, else None (they differ; :func:`check_event_bins` then bins at
+    the default width, with a note).
     """
     readers = [m for m in models if get_model_class(m).takes_events] or list(models)
     widths = {bin_ms_for(get_model_class(m), (params or {}).get(m), bin_ms) for m in readers}
@@ -395,12 +395,11 @@ def check_event_bins(labels: Sequence[ClipLabel], files: dict[str, str | os.Path
     Returns
     -------
     float
-        The width, ms (the default width when the models differ and no clip is a recording).
+        The width, ms; the default width when the models' own widths differ (with a ``note:`` when a clip
+        is a recording).
 
     Raises
     ------
-    UserError
-        The models bin at different widths and a clip is an event recording (give ``--bin-ms``).
     InputError
         A recording's window or contact is given in frames, which count bins of ``--bin-ms``, else of
         the default width, while the models bin it at another width of their own.
@@ -412,8 +411,10 @@ def check_event_bins(labels: Sequence[ClipLabel], files: dict[str, str | os.Path
     if width is None:
         own = ", ".join(f"{m} {bin_ms_for(get_model_class(m), (params or {}).get(m)):.4g} ms" for m in models
                         if get_model_class(m).takes_events)
-        raise UserError(f"the models bin event recordings at different widths ({own}), and a batch run scores every "
-                        "model against one set of labels per clip: give --bin-ms MS to bin them all at one width")
+        print(f"note: the models bin event recordings at different widths ({own}); a batch run scores every model "
+              f"against one set of labels per clip, so all bin them at {DEFAULT_BIN_MS:.6g} ms here "
+              "(--bin-ms MS chooses the width)", file=sys.stderr)
+        return DEFAULT_BIN_MS
     in_bins = [lab.clip for lab in recordings
                if not lab.in_seconds and (lab.window_start is not None or lab.contact_frame is not None)]
     if in_bins and width != DEFAULT_BIN_MS:
