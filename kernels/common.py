@@ -315,15 +315,6 @@ def build(ti, lanes: int) -> SimpleNamespace:
             x[k, i, j + c] = v[c]
 
 
-    @ti.func
-    def _combine(acc, r, reduce: ti.template()):
-        """``acc + r`` (``reduce == "sum"``) or ``max(acc, r)``."""
-        out = acc + r
-        if ti.static(reduce == "max"):
-            out = ti.max(acc, r)
-        return out
-
-
     @ti.kernel
     def fill(x: F2, value: ti.f32):
         """Set every element of ``x`` to ``value``."""
