@@ -199,6 +199,32 @@ def build(ti, lanes: int) -> SimpleNamespace:
         return p / q
 
 
+    # -- stage helpers: ``a`` is the engine's cell (kernels/engine.py), a lane vector or one pixel --------
+    @ti.func
+    def grey_levels(a: ti.template(), scale):
+        """The input frame as 8-bit grey levels ``floor(scale g + 0.5)`` (``scale``: 1 for uint8, 255 for
+        float frames in [0, 1])."""
+        return ti.floor(a.grey() * scale + 0.5)
+
+    @ti.func
+    def half_wave(p):
+        """``([P]^+, [-P]^+)``: the ON and OFF parts of a luminance change ``P``."""
+        return ti.max(p, 0.0), ti.max(0.0 - p, 0.0)
+
+    @ti.func
+    def weighted3(coefs: ti.template(), at: ti.template(), centre, edge, diag):
+        """``w_c centre + w_e edge + w_d diag``: a symmetric 3x3 kernel on the sums of ``a.window3``, its centre,
+        edge and diagonal weights ``coefs[at .. at + 2]`` (``coefs``: the cell's coefficient array ``a.coefs``,
+        ``at`` a slot: a stage's helper takes the cell and at most two more)."""
+        return coefs[at] * centre + coefs[at + 1] * edge + coefs[at + 2] * diag
+
+    @ti.func
+    def mean3(a: ti.template(), plane: ti.template()):
+        """The 3x3 mean of ``plane`` (its border outside the frame)."""
+        centre, edge, diag = a.window3(plane)
+        return (centre + edge + diag) * (1.0 / 9.0)
+
+
     @ti.func
     def start_coefficients(coef: ti.template(), at):
         """The 7 local-start coefficients ``coef[at:at + 7]`` (a row of
