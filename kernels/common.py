@@ -1,4 +1,4 @@
-"""Shared Taichi helpers: border handling, rational tanh, work partitioning, launch records."""
+"""Shared Taichi helpers: border handling, rational tanh, lane arrays, launch records."""
 
 
 import collections
@@ -13,43 +13,6 @@ from . import compat
 
 REPLICATE, REFLECT, ZERO = 0, 1, 2
 BORDER_CODES = {"replicate": REPLICATE, "reflect": REFLECT, "zero": ZERO}
-
-# Taichi 1.7 hands each CPU thread chunks of the outer loop; a 240-row frame
-# would run on one thread if we looped over rows only. Loop over
-# (row, column-block) items instead; each item visits its columns in runs
-# (row_runs, below).
-COLUMN_BLOCKS = 4
-
-
-def column_blocks(width: int, arch: str) -> int:
-    """Work items per row of the generic (row-run) kernels for frames ``width`` px wide.
-
-    On the CPU, :data:`COLUMN_BLOCKS` (each thread takes chunks of rows x blocks). On a
-    GPU, one item per :data:`CHUNK` columns, so that a 426x240 frame is 6480 GPU threads
-    rather than 960, each running one run of ``CHUNK`` columns (``block_span`` rounds a
-    block up to whole runs).
-
-    Parameters
-    ----------
-    width : int
-        Frame width (px).
-    arch : str
-        The runtime's arch (``"cpu"``, ``"cuda"``, ...), as ``ensure_taichi`` returns it.
-    """
-    return COLUMN_BLOCKS if arch == "cpu" else max(1, -(-int(width) // CHUNK))
-
-
-# -- row runs -----------------------------------------------------------------------
-# taichi 1.7 does not loop-vectorise ndarray loops (see kernels/cdnf.py), but it does
-# SLP-vectorise straight-line code. A row kernel therefore visits its columns in runs:
-# CHUNK consecutive columns at a time, written once as a function of vectors of n
-# columns (``run_load``/``plane_store``), called with n = CHUNK where the 3x3 neighbours
-# are inside the frame and with n = 1 at the borders (neighbour columns clamped:
-# the replicate border) and for the last columns of a segment.
-
-CHUNK = 16
-QUARTER = 4  # the shorter runs that finish a segment
-
 
 # ---------------------------------------------------------------------------
 # Lane-vectorised kernels on padded lane arrays (the fast path).
@@ -71,8 +34,7 @@ QUARTER = 4  # the shorter runs that finish a segment
 # work on lane arrays (C-DNF's and the LGMD family's ``lanes_*``) compile with explicit
 # vector types (``taichi_runtime.vector_kernel``): a lane vector stays one LLVM vector,
 # which the code generator lowers to the host's widest registers, under both compilers
-# (docs/PERFORMANCE.md). The helpers below also serve the row runs of the
-# generic kernels, which compile the usual (scalarised) way.
+# (docs/PERFORMANCE.md).
 #
 # The lane count suits the compiler, and is 32 for both now: with explicit vector types
 # every lane model ran faster at 32 lanes than at 16 under quadrants on the Zen 5 host
@@ -237,6 +199,32 @@ def build(ti, lanes: int) -> SimpleNamespace:
         return p / q
 
 
+    # -- stage helpers: ``a`` is the engine's cell (kernels/engine.py), a lane vector or one pixel --------
+    @ti.func
+    def grey_levels(a: ti.template(), scale):
+        """The input frame as 8-bit grey levels ``floor(scale g + 0.5)`` (``scale``: 1 for uint8, 255 for
+        float frames in [0, 1])."""
+        return ti.floor(a.grey() * scale + 0.5)
+
+    @ti.func
+    def half_wave(p):
+        """``([P]^+, [-P]^+)``: the ON and OFF parts of a luminance change ``P``."""
+        return ti.max(p, 0.0), ti.max(0.0 - p, 0.0)
+
+    @ti.func
+    def weighted3(coefs: ti.template(), at: ti.template(), centre, edge, diag):
+        """``w_c centre + w_e edge + w_d diag``: a symmetric 3x3 kernel on the sums of ``a.window3``, its centre,
+        edge and diagonal weights ``coefs[at .. at + 2]`` (``coefs``: the cell's coefficient array ``a.coefs``,
+        ``at`` a slot: a stage's helper takes the cell and at most two more)."""
+        return coefs[at] * centre + coefs[at + 1] * edge + coefs[at + 2] * diag
+
+    @ti.func
+    def mean3(a: ti.template(), plane: ti.template()):
+        """The 3x3 mean of ``plane`` (its border outside the frame)."""
+        centre, edge, diag = a.window3(plane)
+        return (centre + edge + diag) * (1.0 / 9.0)
+
+
     @ti.func
     def start_coefficients(coef: ti.template(), at):
         """The 7 local-start coefficients ``coef[at:at + 7]`` (a row of
@@ -277,51 +265,6 @@ def build(ti, lanes: int) -> SimpleNamespace:
         if ti.static(mode == ZERO):
             w = ti.select((i >= 0) & (i < n), 1.0, 0.0)
         return w
-
-
-    @ti.func
-    def block_span(k, width, blocks):
-        """Row and column range [j0, j1) of work item ``k`` (row-major items)."""
-        i = k // blocks
-        b = k % blocks
-        bw = ((width + blocks - 1) // blocks + CHUNK - 1) // CHUNK * CHUNK  # whole runs (row_runs)
-        j0 = ti.min(b * bw, width)
-        j1 = ti.min(j0 + bw, width)
-        return i, j0, j1
-
-
-    @ti.func
-    def run_load(x: ti.template(), i, j, n: ti.template()):
-        """``x[i, j .. j + n - 1]`` as a float32 vector of n values."""
-        v = ti.Vector([0.0] * n, dt=ti.f32)
-        for c in ti.static(range(n)):
-            v[c] = ti.cast(x[i, j + c], ti.f32)
-        return v
-
-
-    @ti.func
-    def plane_load(x: ti.template(), k, i, j, n: ti.template()):
-        """``x[k, i, j .. j + n - 1]`` (plane ``k`` of a stacked array) as a float32 vector of n values."""
-        v = ti.Vector([0.0] * n, dt=ti.f32)
-        for c in ti.static(range(n)):
-            v[c] = x[k, i, j + c]
-        return v
-
-
-    @ti.func
-    def plane_store(x: ti.template(), k, i, j, v, n: ti.template()):
-        """``x[k, i, j .. j + n - 1] = v``."""
-        for c in ti.static(range(n)):
-            x[k, i, j + c] = v[c]
-
-
-    @ti.func
-    def _combine(acc, r, reduce: ti.template()):
-        """``acc + r`` (``reduce == "sum"``) or ``max(acc, r)``."""
-        out = acc + r
-        if ti.static(reduce == "max"):
-            out = ti.max(acc, r)
-        return out
 
 
     @ti.kernel

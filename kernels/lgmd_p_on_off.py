@@ -36,7 +36,7 @@ CHANNELS = {"ON": (RON, E_ON, 0), "OFF": (ROFF, E_OFF, 2)}
 @functools.lru_cache(maxsize=None)
 def build(ti, lanes: int) -> SimpleNamespace:
     """LGMD_P_ON_OFF's launch for the DSL module ``ti``: the stages below, bound to the engine."""
-    tanh_rational = common.build(ti, lanes).tanh_rational
+    C = common.build(ti, lanes)
 
     @ti.func
     def photoreceptors(a: ti.template()):
@@ -46,11 +46,12 @@ def build(ti, lanes: int) -> SimpleNamespace:
             a.put(ON, a.event(0) * scale)
             a.put(OFF, a.event(1) * scale)
         else:
-            g = ti.floor(a.grey() * scale + 0.5)
+            g = C.grey_levels(a, scale)
             p = a.value(V.keep) * (g - a.at(L))
             a.put(L, g)
-            a.put(ON, ti.max(p, 0.0))
-            a.put(OFF, ti.max(0.0 - p, 0.0))
+            on, off = C.half_wave(p)
+            a.put(ON, on)
+            a.put(OFF, off)
 
     @ti.func
     def row_pass(a: ti.template()):
@@ -72,7 +73,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
         m_hat = a.zeros()
         for d in ti.static(range(-R, R + 1)):
             m_hat += a.coef(K.taps, d + R) * a.at(rows, d, 0)
-        a.put(e.now, tanh_rational(a.at(p_x) / (m_hat + a.coef(K.alpha_1))))
+        a.put(e.now, C.tanh_rational(a.at(p_x) / (m_hat + a.coef(K.alpha_1))))
 
     @ti.func
     def normalisation(a: ti.template()):
@@ -88,7 +89,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
         k_c = centre - (edge + diag) * 0.125
         contrast = ti.max(k_c, 0.0 - k_c)
         b_c, b_e, b_d = a.window3(e.before)
-        inhibition = a.coef(K.k_i, 0) * b_c + a.coef(K.k_i, 1) * b_e + a.coef(K.k_i, 2) * b_d
+        inhibition = C.weighted3(a.coefs, K.k_i.slot, b_c, b_e, b_d)
         motion = centre - a.coef(K.beta) * inhibition
         return ti.max(a.coef(K.gains, gain) * motion - a.coef(K.gains, gain + 1) * contrast, 0.0)
 
@@ -101,8 +102,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
     @ti.func
     def excitation(a: ti.template()):
         """``Ce`` = the 3x3 mean of ``S``; returns it (maxed)."""
-        centre, edge, diag = a.window3(S)
-        ce = (centre + edge + diag) * (1.0 / 9.0)
+        ce = C.mean3(a, S)
         a.put(Ce, ce)
         return ce
 

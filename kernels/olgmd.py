@@ -15,7 +15,7 @@ Borders (the model's ``borders()``): ``variant="code"`` zeroes the outermost rin
 import functools
 from types import SimpleNamespace
 
-from . import engine
+from . import common, engine
 from .engine import Coefs, Launch, Planes, Scalars, Stage
 
 PLANES = Planes("L P:2 ON:2 OFF:2 S Ce G")
@@ -34,6 +34,7 @@ CHANNELS = {"ON": (K.k_on, V.w1, V.prev_on), "OFF": (K.k_off, V.w2, V.prev_off)}
 def build(ti, lanes: int) -> SimpleNamespace:
     """oLGMD's launches for the DSL module ``ti``: the stages below, bound to the engine."""
     E = engine.build(ti, lanes)
+    C = common.build(ti, lanes)
 
     @ti.func
     def luminance_change(g, l_prev, p1, p2, a_1, a_2):
@@ -43,12 +44,13 @@ def build(ti, lanes: int) -> SimpleNamespace:
     @ti.func
     def polarity(p, on_prev, off_prev, a1):
         """``(P_on, P_off) = ([P]^+ + a1 P_on(t-1), [-P]^+ + a1 P_off(t-1))``."""
-        return ti.max(p, 0.0) + a1 * on_prev, ti.max(0.0 - p, 0.0) + a1 * off_prev
+        on, off = C.half_wave(p)
+        return on + a1 * on_prev, off + a1 * off_prev
 
     @ti.func
     def photoreceptors(a: ti.template()):
         """Grey levels, ``P``, ``P_on``, ``P_off`` (while ``active``); returns ``(P_on, P_off)``."""
-        g = ti.floor(a.grey() * a.value(V.scale) + 0.5)
+        g = C.grey_levels(a, a.value(V.scale))
         on, off = a.zeros(), a.zeros()
         if a.value(V.active) > 0.0:
             p = luminance_change(g, a.at(L), a.at(P.before), a.at(P.now), a.value(V.a_1), a.value(V.a_2))
@@ -63,8 +65,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
     def inhibition(coefs: ti.template(), k: ti.template(), now_c, now_e, now_d, b_c, b_e, b_d, prev):
         """``I = sum_ij K_ij (a_ij E + (1 - a_ij) E(t-1))`` from the centre, edge and diagonal sums of ``E``
         and ``E(t-1)`` (``coefs``: the coefficient array, ``k`` the channel's weights); ``prev`` weighs ``E(t-1)``."""
-        return (coefs[k.slot] * now_c + coefs[k.slot + 1] * now_e + coefs[k.slot + 2] * now_d
-                + prev * (coefs[k.slot + 3] * b_c + coefs[k.slot + 4] * b_e + coefs[k.slot + 5] * b_d))
+        return C.weighted3(coefs, k.slot, now_c, now_e, now_d) + prev * C.weighted3(coefs, k.slot + 3, b_c, b_e, b_d)
 
     @ti.func
     def channel(a: ti.template(), e: ti.template()):
@@ -91,8 +92,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
     @ti.func
     def excitation(a: ti.template()):
         """``Ce`` = the 3x3 mean of ``S``; returns it (maxed)."""
-        centre, edge, diag = a.window3(S)
-        ce = (centre + edge + diag) * (1.0 / 9.0)
+        ce = C.mean3(a, S)
         a.put(Ce, ce)
         return ce
 

@@ -16,6 +16,31 @@ from .common import REFLECT, namespace  # noqa: F401 - part of this module's int
 #: Pixel states of an incoherent stimulus (see :mod:`cdnf_ti.stimuli.incoherent`).
 BACKGROUND, KEPT, DISPLACED, TARGET = 0, 1, 2, 3
 
+# Taichi 1.7 hands each CPU thread chunks of the outer loop; a 240-row frame would run on one
+# thread if a kernel looped over rows only. The kernels below loop over (row, column block) work
+# items instead (:func:`block_span`).
+#: Work items per row on the CPU.
+COLUMN_BLOCKS = 4
+#: Columns per work item on a GPU (a CPU block is rounded up to whole multiples of it).
+CHUNK = 16
+
+
+def column_blocks(width: int, arch: str) -> int:
+    """Work items per row of the stimulus kernels for frames ``width`` px wide.
+
+    On the CPU, :data:`COLUMN_BLOCKS` (each thread takes chunks of rows x blocks). On a
+    GPU, one item per :data:`CHUNK` columns, so that a 426x240 frame is 6480 GPU threads
+    rather than 960 (``block_span`` rounds a block up to whole multiples of ``CHUNK``).
+
+    Parameters
+    ----------
+    width : int
+        Frame width (px).
+    arch : str
+        The runtime's arch (``"cpu"``, ``"cuda"``, ...), as ``ensure_taichi`` returns it.
+    """
+    return COLUMN_BLOCKS if arch == "cpu" else max(1, -(-int(width) // CHUNK))
+
 
 @functools.lru_cache(maxsize=None)
 def build(ti, lanes: int) -> SimpleNamespace:
@@ -23,7 +48,6 @@ def build(ti, lanes: int) -> SimpleNamespace:
     lanes per vector element of the fast path: a namespace of every name below (and the
     module-level constants). Built once per (compiler, lanes), after the runtime started."""
     C = common.build(ti, lanes)
-    block_span = C.block_span
     border_index = C.border_index
     fill = C.fill
 
@@ -33,6 +57,16 @@ def build(ti, lanes: int) -> SimpleNamespace:
     I1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
     B2 = ti.types.ndarray(dtype=ti.i8, ndim=2)
 
+
+    @ti.func
+    def block_span(k, width, blocks):
+        """Row ``i`` and column range [j0, j1) of work item ``k`` (row-major items, ``blocks`` per row)."""
+        i = k // blocks
+        b = k % blocks
+        bw = ((width + blocks - 1) // blocks + CHUNK - 1) // CHUNK * CHUNK  # whole multiples of CHUNK
+        j0 = ti.min(b * bw, width)
+        j1 = ti.min(j0 + bw, width)
+        return i, j0, j1
 
     @ti.kernel
     def incoherent_render(state: B2, out: F2, obj: ti.f32, bg: ti.f32, blocks: ti.i32):

@@ -26,7 +26,7 @@ from typing import Iterator
 
 import numpy as np
 
-from ..kernels import common
+from ..kernels import stimuli as stimulus_kernels
 from ..taichi_runtime import current_arch, ensure_taichi, kernels
 
 #: Image-size laws of the looming/receding square (``BasicStimulus.expansion``).
@@ -279,10 +279,10 @@ def taichi_stimulus_kernels(width: int):
     """``(cdnf_ti.kernels.stimuli, work items per row)`` for frames ``width`` px wide.
 
     Initialises Taichi on first use (on the process's arch); the work items per row are
-    :func:`cdnf_ti.kernels.common.column_blocks` of that arch.
+    :func:`cdnf_ti.kernels.stimuli.column_blocks` of that arch.
     """
     arch = ensure_taichi(current_arch() or "cpu")
-    return kernels("stimuli"), common.column_blocks(width, arch)
+    return kernels("stimuli"), stimulus_kernels.column_blocks(width, arch)
 
 
 def check_seed(seed: object) -> int:

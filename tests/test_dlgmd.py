@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import functools
 
-import cv2
+import model_checks as checks
 import numpy as np
 import pytest
 
@@ -30,43 +30,23 @@ def engine(path: str = "lanes", **kw) -> DLGMD:
     return model
 
 
-def agreement(tr, ref: dict) -> dict:
-    """Largest differences of the engine's trace ``tr`` from the reference's run ``ref``, alerts equal."""
-    return {"mp": float(np.max(np.abs(tr.output - ref["mp"]))),
-            "g_sum": float(np.max(np.abs(tr.diagnostics["g_sum"] - ref["g_sum"]) / np.maximum(ref["g_sum"], 1.0))),
-            "alerts_equal": bool(np.array_equal(tr.spike, ref["alert"])), "alerts": int(ref["alert"].sum()),
-            "peak_g": float(ref["g_sum"].max())}
-
-
-def compare(frames: list[np.ndarray], path: str, **kw) -> dict:
-    h, w = np.asarray(frames[0]).shape[:2]
+def compare(inputs: list, path: str, **kw) -> dict:
+    """Engine and reference on ``inputs`` (frames or event bins): largest ``mp`` and relative ``g_sum``
+    differences, alerts equal, the reference's peak ``g_sum``."""
     model = engine(path, **kw)
-    tr = model.run(frames)
+    r = checks.compare(model, lambda h, w: DLGMDReference(h, w, DLGMDParams(**kw)), inputs, "mp",
+                       relative={"g_sum": 1.0}, peak="g_sum")
     assert model._be.lane is (path == "lanes")
-    return agreement(tr, DLGMDReference(h, w, DLGMDParams(**kw)).run(frames))
+    return r
 
 
 def assert_agrees(r: dict) -> None:
-    assert r["mp"] < MP_TOL and r["g_sum"] < 1e-4 and r["alerts_equal"], r
+    checks.assert_agrees(r, mp=MP_TOL, g_sum=1e-4)
 
 
 @functools.cache
 def stimulus(name: str) -> tuple[np.ndarray, ...]:
     return tuple(basic_stimulus(name, height=SIZE, width=SIZE).frames())
-
-
-def real_frames(shared_real, clip: str, n: int = 40) -> list[np.ndarray]:
-    path = shared_real / clip if shared_real else None
-    if path is None or not path.exists():
-        pytest.skip(f"the development clip {clip} is not here (shared data absent)")
-    cap = cv2.VideoCapture(str(path))
-    frames = []
-    while len(frames) < n:
-        ok, f = cap.read()
-        if not ok:
-            break
-        frames.append(f)
-    return frames
 
 
 def difference_bins(frames) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -86,7 +66,7 @@ def test_engine_matches_reference_on_basic_stimulus(name, path):
 @pytest.mark.parametrize("path", PATHS)
 @pytest.mark.parametrize("clip", REAL_CLIPS)
 def test_engine_matches_reference_on_real_clip(shared_real, clip, path):
-    assert_agrees(compare(real_frames(shared_real, clip), path))
+    assert_agrees(compare(checks.clip_frames(shared_real, clip, 40), path))
 
 
 @pytest.mark.parametrize("path", PATHS)
@@ -126,13 +106,8 @@ def test_layers_match_the_reference_layers(path):
 # -- event input -------------------------------------------------------------------------------------
 @pytest.mark.parametrize("path", PATHS)
 def test_event_bins_match_the_reference(path):
-    bins = difference_bins(stimulus("light_looming"))
-    model = engine(path)
-    tr = model.run(bins)
-    ref = DLGMDReference(SIZE, SIZE)
-    steps = [ref.step_on_off(on, off) for on, off in bins]
-    r = agreement(tr, {k: np.array([getattr(s, k) for s in steps]) for k in ("mp", "g_sum", "alert")})
-    assert r["peak_g"] > 100
+    r = compare(difference_bins(stimulus("light_looming")), path)
+    assert r["peak"] > 100
     assert_agrees(r)
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import functools
 
 import cv2
+import model_checks as checks
 import numpy as np
 import pytest
 
@@ -37,31 +38,22 @@ def stimulus(name: str) -> tuple[tuple[np.ndarray, ...], float]:
 
 
 def real_frames(shared_real, clip: str, n: int = 40) -> list[np.ndarray]:
-    path = shared_real / clip if shared_real else None
-    if path is None or not path.exists():
-        pytest.skip("the development clips (data/real of the shared data) are not here")
-    cap = cv2.VideoCapture(str(path))
-    frames = []
-    while len(frames) < n:
-        ok, f = cap.read()
-        if not ok:
-            break
-        frames.append(to_grey(cv2.resize(f, REAL_SIZE, interpolation=cv2.INTER_AREA)))
-    return frames
+    return [to_grey(cv2.resize(f, REAL_SIZE, interpolation=cv2.INTER_AREA))
+            for f in checks.clip_frames(shared_real, clip, n)]
 
 
-def assert_equal_to_reference(steps, ref: dict) -> None:
-    """Output within OUTPUT_TOL and the alert equal on every frame."""
-    out = np.array([s.output for s in steps])
-    assert np.max(np.abs(out - ref["output"])) < OUTPUT_TOL, np.max(np.abs(out - ref["output"]))
-    np.testing.assert_array_equal([s.spike for s in steps], ref["alert"])
+def compare(m: EventLooming, inputs: list, reference_inputs=None) -> dict:
+    """``m`` and the reference of its variant on ``inputs`` (frames or event bins; the reference steps
+    ``reference_inputs``, the signed maps): largest output difference, alerts equal, alerts."""
+    return checks.compare(m, lambda h, w: EventLoomingReference(h, w, m.params.variant), inputs, "output",
+                          reference_inputs=reference_inputs)
 
 
 def compare_frames(frames, fps: float, path: str, variant: str = "code") -> None:
-    h, w = np.asarray(frames[0]).shape[:2]
-    m = model(path, variant, fps)
-    steps = [m.step(f) for f in frames]
-    assert_equal_to_reference(steps, EventLoomingReference(h, w, variant).run(frame_bins(frames, fps)))
+    """Output within OUTPUT_TOL and the alert equal on every frame, the reference stepping the emulator's
+    events of the frames."""
+    checks.assert_agrees(compare(model(path, variant, fps), frames, list(frame_bins(frames, fps))),
+                         output=OUTPUT_TOL)
 
 
 def event_bins(frames, fps: float) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -94,10 +86,9 @@ def test_compiled_model_equals_the_reference_on_real_clips(shared_real, clip, pa
 def test_event_bins_equal_the_reference_on_their_signed_maps(path):
     frames, fps = stimulus("dark_looming")
     bins = event_bins(frames, fps)
-    m = model(path, fps=fps)
-    steps = [m.step_on_off(p_on, p_off) for p_on, p_off in bins]
-    assert any(s.spike for s in steps)
-    assert_equal_to_reference(steps, EventLoomingReference(SIZE, SIZE).run(signed_map(*b) for b in bins))
+    r = compare(model(path, fps=fps), bins, [signed_map(*b) for b in bins])
+    assert r["alerts"] > 0
+    checks.assert_agrees(r, output=OUTPUT_TOL)
 
 
 def test_an_event_bin_pixel_takes_the_polarity_with_more_contrast():

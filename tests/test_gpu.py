@@ -87,7 +87,7 @@ def test_bench_on_cuda_runs_or_fails_with_one_line(compiler):
 
 
 def test_a_gpu_gets_one_work_item_per_run_of_columns():
-    from cdnf_ti.kernels.common import CHUNK, COLUMN_BLOCKS, column_blocks
+    from cdnf_ti.kernels.stimuli import CHUNK, COLUMN_BLOCKS, column_blocks
 
     assert column_blocks(426, "cpu") == COLUMN_BLOCKS
     assert column_blocks(426, "cuda") == -(-426 // CHUNK) == 27  # 240 x 27 = 6480 GPU threads at 426x240
@@ -97,10 +97,10 @@ def test_a_gpu_gets_one_work_item_per_run_of_columns():
 @pytest.mark.parametrize("name", MODELS)
 def test_the_gpu_work_partition_computes_the_reference_result(name, monkeypatch):
     # the generic kernels with the GPU's work items (one per run of columns), run here on the CPU
-    from cdnf_ti.kernels import common
+    from cdnf_ti.kernels import stimuli
 
-    cpu_blocks = common.column_blocks
-    monkeypatch.setattr(common, "column_blocks", lambda width, arch: cpu_blocks(width, "cuda"))
+    cpu_blocks = stimuli.column_blocks
+    monkeypatch.setattr(stimuli, "column_blocks", lambda width, arch: cpu_blocks(width, "cuda"))
     frames = [np.ascontiguousarray(f[::2, ::3][:, :70]) for f in standin_video(8, seed=3)]  # 120 x 70
     model = create_model(name)
     model.fast = False  # the generic kernels, which GPUs run
@@ -133,10 +133,10 @@ def _stimulus_pairs():
 
 def test_the_gpu_work_partition_renders_the_reference_stimuli(monkeypatch):
     # the stimulus kernels with the GPU's work items, run here on the CPU, against the NumPy renderings
-    from cdnf_ti.kernels import common
+    from cdnf_ti.kernels import stimuli
 
-    cpu_blocks = common.column_blocks
-    monkeypatch.setattr(common, "column_blocks", lambda width, arch: cpu_blocks(width, "cuda"))
+    cpu_blocks = stimuli.column_blocks
+    monkeypatch.setattr(stimuli, "column_blocks", lambda width, arch: cpu_blocks(width, "cuda"))
     for name, got, ref in _stimulus_pairs():
         assert len(got) == len(ref) > 1, name
         for k, (a, b) in enumerate(zip(got, ref)):

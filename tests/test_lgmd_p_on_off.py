@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import functools
 
-import cv2
+import model_checks as checks
 import numpy as np
 import pytest
 
@@ -36,20 +36,14 @@ def engine(layout: str, **params) -> LGMDPOnOff:
 def compare(frames: list, layout: str, **params) -> dict:
     """Engine and reference on ``frames`` (or event bins): largest ``mp`` difference, alerts equal, alerts."""
     model = engine(layout, **params)
-    tr = model.run(frames)
-    first = frames[0][0] if isinstance(frames[0], tuple) else frames[0]
-    ref = LGMDPOnOffReference(*np.shape(first)[:2], variant=model.params.variant, params=model.params)
-    out = [ref.step_on_off(*f) if isinstance(f, tuple) else ref.step(f) for f in frames]
-    mp = np.array([s.mp for s in out])
-    alerts = np.array([s.alert for s in out])
+    r = checks.compare(model, lambda h, w: LGMDPOnOffReference(h, w, variant=model.params.variant,
+                                                               params=model.params), frames, "mp", peak="mp")
     assert model._be.lane is LAYOUTS[layout]
-    return {"mp": float(np.max(np.abs(tr.output - mp))), "alerts_equal": bool(np.array_equal(tr.spike, alerts)),
-            "alerts": int(alerts.sum()), "peak": float(mp.max())}
+    return r
 
 
 def assert_agrees(r: dict) -> None:
-    assert r["mp"] < MP_TOL, r
-    assert r["alerts_equal"], r
+    checks.assert_agrees(r, mp=MP_TOL)
 
 
 @functools.cache
@@ -60,19 +54,8 @@ def stimulus(name: str) -> tuple:
 @functools.cache
 def real_frames(folder, clip: str) -> tuple:
     """Frames ``REAL_CLIPS[clip]`` of a development clip, BGR uint8 as read."""
-    path = folder / clip if folder else None
-    if path is None or not path.exists():
-        pytest.skip(f"{clip}: the development clips (CDNF_TI_SHARED/data/real) are not here")
     start, stop = REAL_CLIPS[clip]
-    cap = cv2.VideoCapture(str(path))
-    frames = []
-    for k in range(stop):
-        ok, f = cap.read()
-        if not ok:
-            break
-        if k >= start:
-            frames.append(f)
-    return tuple(frames)
+    return tuple(checks.clip_frames(folder, clip, stop, start))
 
 
 def event_bins(n: int, shape: tuple[int, int], seed: int) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 import cv2
+import model_checks as checks
 import numpy as np
 import pytest
 
@@ -43,40 +44,18 @@ def engine(variant: str, fps: float = 30.0, path: str = "lanes", **kw) -> OLGMD:
 
 def compare(frames: list[np.ndarray], variant: str, fps: float = 30.0, path: str = "lanes") -> dict:
     """Engine and reference on ``frames``: largest differences and whether every alert is equal."""
-    h, w = np.asarray(frames[0]).shape[:2]
-    tr = engine(variant, fps, path).run(frames)
-    ref = OLGMDReference(h, w, variant=variant, fps=fps).run(frames)
-    return {"K": float(np.max(np.abs(tr.output - ref["k"]))),
-            "k_raw": float(np.max(np.abs(tr.diagnostics["k_raw"] - ref["k_raw"]))),
-            "aim": float(np.max(np.abs(tr.diagnostics["aim"] - ref["aim"]) / np.maximum(ref["aim"], 1e-9))),
-            "spike_sum": float(np.max(np.abs(tr.diagnostics["spike_sum"] - ref["spike_sum"]))),
-            "alerts_equal": bool(np.array_equal(tr.spike, ref["alert"])), "alerts": int(ref["alert"].sum())}
+    return checks.compare(engine(variant, fps, path), lambda h, w: OLGMDReference(h, w, variant=variant, fps=fps),
+                          frames, "k", absolute=("k_raw", "spike_sum"), relative={"aim": 1e-9})
 
 
 def assert_agrees(r: dict) -> None:
-    assert r["K"] < K_TOL and r["k_raw"] < K_TOL, r
-    assert r["aim"] < 1e-5, r
-    assert r["alerts_equal"], r
+    checks.assert_agrees(r, k=K_TOL, k_raw=K_TOL, aim=1e-5)
 
 
 @functools.cache
 def stimulus(name: str, size: int = SIZE) -> tuple[tuple[np.ndarray, ...], float]:
     st = basic_stimulus(name, height=size, width=size)
     return tuple(st.frames()), float(st.fps)
-
-
-def real_frames(shared_real, clip: str, n: int = 40) -> list[np.ndarray]:
-    path = shared_real / clip if shared_real else None
-    if path is None or not path.exists():
-        pytest.skip("the real clips are not here")
-    cap = cv2.VideoCapture(str(path))
-    frames = []
-    while len(frames) < n:
-        ok, f = cap.read()
-        if not ok:
-            break
-        frames.append(f)  # BGR uint8, as their code reads it
-    return frames
 
 
 # -- engine against the reference -------------------------------------------------------------------
@@ -109,11 +88,11 @@ def test_engine_matches_reference_on_a_generated_incoherent_clip(variant, path):
 @pytest.mark.parametrize("variant", VARIANTS)
 @pytest.mark.parametrize("clip", REAL_CLIPS)
 def test_engine_matches_reference_on_real_clip(shared_real, clip, variant, path):
-    assert_agrees(compare(real_frames(shared_real, clip), variant, 30.0, path))
+    assert_agrees(compare(checks.clip_frames(shared_real, clip, 40), variant, 30.0, path))  # BGR, as their code
 
 
 def test_engine_alerts_where_the_reference_does_on_a_real_collision(shared_real):
-    r = compare(real_frames(shared_real, "c38.mp4", 20), "code")
+    r = compare(checks.clip_frames(shared_real, "c38.mp4", 20), "code")
     assert r["alerts"] > 0 and r["alerts_equal"]
 
 

@@ -15,7 +15,7 @@ from .base import Model, ModelBackend, NotConvergedWarning, StepResult, Sweepabl
 from .registry import MODELS, create_model, get_model_class, register_model, sort_models
 
 #: Modules of this package that hold no model.
-_NOT_MODELS = {"base", "registry"}
+_NOT_MODELS = {"base", "reference_backend", "registry"}
 
 for _info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
     if _info.name not in _NOT_MODELS and not _info.name.startswith("_"):

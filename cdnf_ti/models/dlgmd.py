@@ -29,6 +29,7 @@ from .. import dlgmd_reference as ref
 from ..alert_rule import AlertRule
 from ..params import ModelParams, check_params
 from .base import Model, StepResult, Trace
+from .reference_backend import ReferenceBackend
 from .registry import register_model
 
 #: The largest kernel radius the compiled stages take (their row-pass planes, ``kernels/dlgmd.py``).
@@ -49,28 +50,6 @@ class DLGMDParams(ref.DLGMDParams, ModelParams):
             (self.k_spread > 0 and self.k_norm_per_pixel > 0, "k_spread and k_norm_per_pixel must be > 0"),
             (math.isfinite(self.threshold), f"threshold must be finite, got {self.threshold}"),
         ])
-
-
-class _ReferenceBackend:
-    """The ``numpy`` backend: the float64 :class:`~cdnf_ti.dlgmd_reference.DLGMDReference`, stepped whole."""
-
-    name = "numpy"
-
-    def __init__(self, model: "DLGMD", shape: tuple[int, int]):
-        self.shape = tuple(shape)
-        self.ref = ref.DLGMDReference(shape[0], shape[1], model.params)
-
-    def load(self, grey: np.ndarray, first: bool) -> ref.DLGMDStep:
-        return self.ref.step(grey)
-
-    def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> ref.DLGMDStep:
-        return self.ref.step_on_off(p_on, p_off)
-
-    def reset(self) -> None:
-        self.ref.reset()
-
-    def fields(self) -> dict[str, np.ndarray]:
-        return dict(self.ref.layers)
 
 
 @register_model
@@ -134,8 +113,9 @@ class DLGMD(Model):
         self.n_diff = 0  # differences so far
         self.k_prev, self.mp = 0.5, 0.0
 
-    def _numpy_backend(self, shape: tuple[int, int]) -> Any:
-        return _ReferenceBackend(self, shape)
+    def _numpy_backend(self, shape: tuple[int, int]) -> ReferenceBackend:
+        """The float64 :class:`~cdnf_ti.dlgmd_reference.DLGMDReference`, stepped whole."""
+        return ReferenceBackend(ref.DLGMDReference(shape[0], shape[1], self.params), shape)
 
     def _delay_map(self) -> tuple[np.ndarray, tuple, np.ndarray]:
         """``K_E``, the delay-0 cells (grid indices, row-major) and the delay-2 mask, each of the (2r+1)^2 grid

@@ -30,6 +30,7 @@ from .. import event_looming_reference as ref
 from ..events.emulator import EmulatorParams, emulate
 from ..params import ModelParams, check_params
 from .base import Model, StepResult, Trace
+from .reference_backend import ReferenceBackend
 from .registry import register_model
 
 #: The emulator's pixel on frames (the kernels model its defaults: no mismatch, refractory period or noise).
@@ -83,18 +84,16 @@ def float32_parts(value: float) -> list[float]:
     return [high, mid, float(np.float32(value - high - mid))]
 
 
-class _ReferenceBackend:
-    """The ``numpy`` backend: the float64 reference, fed by the emulator on frames, stepped whole."""
+class _ReferenceBackend(ReferenceBackend):
+    """The ``numpy`` backend: the float64 reference, fed by the emulator on frames (at ``fps``), stepped whole."""
 
-    name = "numpy"
-
-    def __init__(self, model: "EventLooming", shape: tuple[int, int]):
-        self.shape, self.fps = tuple(shape), model.fps
-        self.ref = ref.EventLoomingReference(shape[0], shape[1], model.params.variant, model.params)
+    def __init__(self, reference: ref.EventLoomingReference, shape: tuple[int, int], fps: float):
+        super().__init__(reference, shape)
+        self.fps = fps
         self.reset()
 
     def reset(self) -> None:
-        self.ref.reset()
+        super().reset()
         self.frames: deque = deque()
         self.events = emulate(self._pending(), self.fps, EMULATOR)
 
@@ -111,9 +110,6 @@ class _ReferenceBackend:
 
     def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> ref.EventLoomingStep:
         return self.ref.step(signed_map(p_on, p_off))
-
-    def fields(self) -> dict[str, np.ndarray]:
-        return dict(self.ref.layers)
 
 
 @register_model
@@ -169,8 +165,9 @@ class EventLooming(Model):
     def _reset_state(self) -> None:
         self.v = 0.0  # paper: the leaky output
 
-    def _numpy_backend(self, shape: tuple[int, int]) -> Any:
-        return _ReferenceBackend(self, shape)
+    def _numpy_backend(self, shape: tuple[int, int]) -> ReferenceBackend:
+        reference = ref.EventLoomingReference(shape[0], shape[1], self.params.variant, self.params)
+        return _ReferenceBackend(reference, shape, self.fps)
 
     def coefficients(self) -> dict[str, Any]:
         """The emulator's thresholds and ``eps`` and the log levels of uint8 frames (float64, as three float32 parts

@@ -30,6 +30,7 @@ from ..alert_rule import AlertRule
 from ..errors import UserError
 from ..params import ModelParams, check_params, gaussian_profile
 from .base import Model, StepResult, Trace
+from .reference_backend import ReferenceBackend
 from .registry import register_model
 
 
@@ -62,28 +63,6 @@ class LGMDPOnOffParams(ref.LGMDPOnOffParams, ModelParams):
     def radius(self) -> int:
         """The normalisation Gaussian's radius (px)."""
         return int(self.gauss_size) // 2
-
-
-class _ReferenceBackend:
-    """The ``numpy`` backend: the float64 :class:`~cdnf_ti.lgmd_p_on_off_reference.LGMDPOnOffReference`."""
-
-    name = "numpy"
-
-    def __init__(self, model: "LGMDPOnOff", shape: tuple[int, int]):
-        self.shape = tuple(shape)
-        self.ref = ref.LGMDPOnOffReference(shape[0], shape[1], model.params.variant, model.params)
-
-    def load(self, grey: np.ndarray, first: bool) -> ref.LGMDPOnOffStep:
-        return self.ref.step(grey)
-
-    def load_on_off(self, p_on: np.ndarray, p_off: np.ndarray, first: bool) -> ref.LGMDPOnOffStep:
-        return self.ref.step_on_off(p_on, p_off)
-
-    def reset(self) -> None:
-        self.ref.reset()
-
-    def fields(self) -> dict[str, np.ndarray]:
-        return dict(self.ref.layers)
 
 
 @register_model
@@ -143,8 +122,9 @@ class LGMDPOnOff(Model):
     def _setup(self) -> None:
         self.code = self.params.variant == "code"
 
-    def _numpy_backend(self, shape: tuple[int, int]) -> _ReferenceBackend:
-        return _ReferenceBackend(self, shape)
+    def _numpy_backend(self, shape: tuple[int, int]) -> ReferenceBackend:
+        """The float64 :class:`~cdnf_ti.lgmd_p_on_off_reference.LGMDPOnOffReference`, stepped whole."""
+        return ReferenceBackend(ref.LGMDPOnOffReference(shape[0], shape[1], self.params.variant, self.params), shape)
 
     def _init_backend(self, backend: Any) -> None:
         """Frames must be at least as large as the normalisation Gaussian (its reflect border)."""

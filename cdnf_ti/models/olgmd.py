@@ -34,6 +34,7 @@ from .. import olgmd_reference as ref
 from ..alert_rule import AlertRule
 from ..params import ModelParams, check_params
 from .base import Model, StepResult, Trace
+from .reference_backend import ReferenceBackend
 from .registry import register_model
 
 
@@ -69,22 +70,11 @@ class OLGMDParams(ref.OLGMDParams, ModelParams):
         ])
 
 
-class _ReferenceBackend:
+class _ReferenceBackend(ReferenceBackend):
     """The ``numpy`` backend: the float64 :class:`~cdnf_ti.olgmd_reference.OLGMDReference`, stepped whole."""
 
-    name = "numpy"
-
-    def __init__(self, model: "OLGMD", shape: tuple[int, int]):
-        self.shape = tuple(shape)
-        self.ref = ref.OLGMDReference(shape[0], shape[1], model.params.variant, model.fps, model.params)
-
-    def load(self, grey: np.ndarray, first: bool) -> ref.OLGMDStep:
-        return self.ref.step(grey)
-
-    def reset(self) -> None:
-        self.ref.reset()
-
     def fields(self) -> dict[str, np.ndarray]:
+        """The reference's ``S`` and ``G`` of the last frame."""
         return {"S": self.ref.s_layer, "G": self.ref.g_layer}
 
 
@@ -162,8 +152,9 @@ class OLGMD(Model):
         self.open_before = (False, False)  # the gates of the frame before
         self.spikes: deque[float] = deque([0.0] * ref.N_TS, maxlen=ref.N_TS)
 
-    def _numpy_backend(self, shape: tuple[int, int]) -> Any:
-        return _ReferenceBackend(self, shape)
+    def _numpy_backend(self, shape: tuple[int, int]) -> ReferenceBackend:
+        return _ReferenceBackend(ref.OLGMDReference(shape[0], shape[1], self.params.variant, self.fps, self.params),
+                                 shape)
 
     def coefficients(self) -> dict[str, Any]:
         """The stages' coefficients by name: ON / OFF weights ``K a`` and ``K (1 - a)`` (``a = dt / (dt + tau)``),
