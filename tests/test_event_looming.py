@@ -112,6 +112,19 @@ def test_frame_zero_has_no_events_and_frame_k_holds_the_emulator_s_events_since_
 
 
 @pytest.mark.parametrize("path", PATHS)
+@pytest.mark.parametrize("clip", REAL_CLIPS)
+def test_the_signed_map_of_uint8_frames_is_the_emulator_s_on_every_frame(shared_real, clip, path):
+    frames = real_frames(shared_real, clip)
+    assert frames[0].dtype == np.uint8  # the levels table and the band of grey levels that cannot cross
+    bins = list(frame_bins(frames, 30.0))
+    assert np.mean([np.abs(b).mean() for b in bins]) > 0.01  # a moving camera: events over much of the frame
+    m = model(path)
+    for k, (f, b) in enumerate(zip(frames, bins)):
+        m.step(f)
+        np.testing.assert_array_equal(m.fields()["X"], b, err_msg=f"frame {k}")
+
+
+@pytest.mark.parametrize("path", PATHS)
 def test_flow_fields_equal_the_reference_layers(path):
     frames, fps = stimulus("dark_looming")
     m, ref = model(path, fps=fps), EventLoomingReference(SIZE, SIZE)
