@@ -189,7 +189,8 @@ def build(ti, lanes: int) -> SimpleNamespace:
         down = kept(row_run_window(a, DOWN_COLS, range(-before, after + 1)), thr)
         n = (ti.select(left > at, 1.0, 0.0) + ti.select(right > at, 1.0, 0.0) + ti.select(up > at, 1.0, 0.0)
              + ti.select(down > at, 1.0, 0.0))  # the strong arms
-        p = ti.abs(left * right * up * down) * ti.select(n >= a.coef(K.min_arms), inside, 0.0)
+        q = left * right * up * down
+        p = ti.max(q, 0.0 - q) * ti.select(n >= a.coef(K.min_arms), inside, 0.0)  # |q| where n is enough
         a.put(LEFT, left * inside)
         a.put(RIGHT, right * inside)
         a.put(UP, up * inside)

@@ -258,10 +258,9 @@ def imresize_matrix(n: int, scale: float) -> np.ndarray:
     taps = np.floor(x - 2.0 / scale)[:, None] + np.arange(int(np.ceil(4.0 / scale)) + 2)
     d = np.abs(scale * (x[:, None] - taps))
     w = np.where(d <= 1, (1.5 * d - 2.5) * d * d + 1.0, np.where(d <= 2, ((2.5 - 0.5 * d) * d - 4.0) * d + 2.0, 0.0))
-    m = taps.astype(np.int64) % (2 * n)
-    out = np.zeros((x.size, n))
-    np.add.at(out, (np.arange(x.size)[:, None], np.where(m < n, m, 2 * n - 1 - m)), w / w.sum(1, keepdims=True))
-    return out
+    m = taps.astype(np.int64) % (2 * n)  # the mirrored taps' columns: np.where(m < n, m, 2 n - 1 - m)
+    cells = np.arange(x.size)[:, None] * n + np.where(m < n, m, 2 * n - 1 - m)
+    return np.bincount(cells.ravel(), (w / w.sum(1, keepdims=True)).ravel(), x.size * n).reshape(x.size, n)
 
 
 def core_unit(shape: tuple[int, int]) -> tuple[int, int]:
