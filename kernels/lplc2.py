@@ -11,8 +11,10 @@ Two launches, run by the engine (:mod:`cdnf_ti.kernels.engine`) in either layout
      ``horizontal = leftward - rightward``, ``vertical = upward - downward`` (0 on the last row and column);
    * ``columns``, ``arms``: the four radial-opponent half-plane arms of every unit as separable window sums
      (a column pass, then a row pass; zero outside the grid, summed in float64), each kept where
-     ``> arm_t``, and ``lplc2`` their product; results ``active`` (units > 0) and ``core`` (the centre
-     unit's response), then the centre unit's four arms (``centre_lr``, ``centre_ud``).
+     ``> arm_t``, and ``lplc2 = |their product|`` where at least ``min_arms`` of them exceed ``strong_t``
+     (the unit rule: arena ``arm_t = strong_t = 2``, ``min_arms = 4``, i.e. the plain product; real-environment
+     ``arm_t = -2``, ``strong_t = 1.5``, ``min_arms = 3``); results ``active`` (units > 0) and ``core`` (the
+     centre unit's response), then the centre unit's four arms (``centre_lr``, ``centre_ud``).
 
 The window geometry (``half``, ``before``, ``after``) is compile-time (the model's ``kernel_options()``); the row
 pass reads up to ``reach`` columns either side (the engine's wide ghosts). The giant fibre is the model's
@@ -28,8 +30,9 @@ from .engine import Coefs, Launch, Planes, Scalars, Stage
 # "_": scratch, not among the fields: luminance, high-pass, delayed ON / OFF, the column passes
 PLANES = Planes("_L _Fh _Fon _Foff horizontal vertical _h_band _up_cols _down_cols left right up down lplc2 "
                 "_hor_end _hor_start _ver_end _ver_start _h_end _h_start _up_end _up_start _down_end _down_start")
-#: High-pass ``b``, low-pass ``a``, ON / OFF thresholds, arm threshold; the grid (rows, columns) and its centre unit.
-COEFS = Coefs(b_high=1, a_low=1, on_t=1, off_t=1, arm_t=1, grid=2, core=2)
+#: High-pass ``b``, low-pass ``a``, ON / OFF thresholds; the unit rule: an arm is kept above ``arm_t``, a unit needs
+#: ``min_arms`` arms above ``strong_t``; the grid (rows, columns) and its centre unit.
+COEFS = Coefs(b_high=1, a_low=1, on_t=1, off_t=1, arm_t=1, strong_t=1, min_arms=1, grid=2, core=2)
 #: The frame's grey scale: ``L = frame / denom``.
 SCALARS = Scalars("denom")
 (L, FH, FD_ON, FD_OFF, HOR, VER, H_BAND, UP_COLS, DOWN_COLS, LEFT, RIGHT, UP, DOWN, LPLC2, *RUNS) = PLANES
@@ -149,18 +152,16 @@ def build(ti, lanes: int) -> SimpleNamespace:
         """The lane layout's sums of :data:`RUN` rows ending here and starting here, of the motion maps."""
         if ti.static(a.lane):
             for plane in ti.static((HOR, VER)):
-                end, start = ti.static(RUNS_OF[plane.name])
-                a.put(end, column_window(a, plane, ending))
-                a.put(start, column_window(a, plane, starting))
+                for run, offsets in ti.static(zip(RUNS_OF[plane.name], (ending, starting))):
+                    a.put(run, column_window(a, plane, offsets))
 
     @ti.func
     def row_runs(a: ti.template()):
         """The lane layout's sums of :data:`RUN` columns ending here and starting here, of the column passes."""
         if ti.static(a.lane):
             for plane in ti.static((H_BAND, UP_COLS, DOWN_COLS)):
-                end, start = ti.static(RUNS_OF[plane.name])
-                a.put(end, row_window(a, plane, ending))
-                a.put(start, row_window(a, plane, starting))
+                for run, offsets in ti.static(zip(RUNS_OF[plane.name], (ending, starting))):
+                    a.put(run, row_window(a, plane, offsets))
 
     @ti.func
     def columns(a: ti.template()):
@@ -178,14 +179,18 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
     @ti.func
     def arms(a: ti.template()):
-        """The row passes: the four thresholded arms and their product; returns (unit active, centre response)."""
+        """The row passes: the four kept arms and the unit rule (``|their product|`` where at least ``min_arms`` of
+        them are strong); returns (unit active, centre response)."""
         half, before, after = ti.static(a.option("half"), a.option("before"), a.option("after"))
-        thr, inside = a.coef(K.arm_t), grid(a)
+        thr, at, inside = a.coef(K.arm_t), a.coef(K.strong_t), grid(a)
         left = kept(row_run_window(a, H_BAND, range(1 - half, 1)), thr)
         right = kept(0.0 - row_run_window(a, H_BAND, range(1, half + 1)), thr)
         up = kept(row_run_window(a, UP_COLS, range(-before, after + 1)), thr)
         down = kept(row_run_window(a, DOWN_COLS, range(-before, after + 1)), thr)
-        p = left * right * up * down * inside
+        n = (ti.select(left > at, 1.0, 0.0) + ti.select(right > at, 1.0, 0.0) + ti.select(up > at, 1.0, 0.0)
+             + ti.select(down > at, 1.0, 0.0))  # the strong arms
+        q = left * right * up * down
+        p = ti.max(q, 0.0 - q) * ti.select(n >= a.coef(K.min_arms), inside, 0.0)  # |q| where n is enough
         a.put(LEFT, left * inside)
         a.put(RIGHT, right * inside)
         a.put(UP, up * inside)
@@ -202,14 +207,12 @@ def build(ti, lanes: int) -> SimpleNamespace:
     @ti.func
     def centre_lr(a: ti.template()):
         """The centre unit's left and right arms."""
-        c = centre(a)
-        return a.at(LEFT) * c, a.at(RIGHT) * c
+        return a.at(LEFT) * centre(a), a.at(RIGHT) * centre(a)
 
     @ti.func
     def centre_ud(a: ti.template()):
         """The centre unit's up and down arms."""
-        c = centre(a)
-        return a.at(UP) * c, a.at(DOWN) * c
+        return a.at(UP) * centre(a), a.at(DOWN) * centre(a)
 
     first = Launch("store", Stage(store))
     frame = Launch("frame", Stage(filters, ghosts=(FH, FD_ON, FD_OFF)), Stage(motion), Stage(column_runs),
