@@ -168,9 +168,9 @@ def build(ti, lanes: int) -> SimpleNamespace:
         """The column passes: ``horizontal`` over the band rows, ``vertical`` over the half-fields above
         (up) and below (down, negated)."""
         half, before, after = ti.static(a.option("half"), a.option("before"), a.option("after"))
-        a.put(H_BAND, column_run_window(a, HOR, range(-before, after + 1)))
-        a.put(UP_COLS, column_run_window(a, VER, range(1 - half, 1)))
-        a.put(DOWN_COLS, 0.0 - column_run_window(a, VER, range(1, half + 1)))
+        a.put(H_BAND, column_run_window(a, HOR, ti.static(range(-before, after + 1))))
+        a.put(UP_COLS, column_run_window(a, VER, ti.static(range(1 - half, 1))))
+        a.put(DOWN_COLS, 0.0 - column_run_window(a, VER, ti.static(range(1, half + 1))))
 
     @ti.func
     def kept(arm, threshold):
@@ -183,10 +183,10 @@ def build(ti, lanes: int) -> SimpleNamespace:
         them are strong); returns (unit active, centre response)."""
         half, before, after = ti.static(a.option("half"), a.option("before"), a.option("after"))
         thr, at, inside = a.coef(K.arm_t), a.coef(K.strong_t), grid(a)
-        left = kept(row_run_window(a, H_BAND, range(1 - half, 1)), thr)
-        right = kept(0.0 - row_run_window(a, H_BAND, range(1, half + 1)), thr)
-        up = kept(row_run_window(a, UP_COLS, range(-before, after + 1)), thr)
-        down = kept(row_run_window(a, DOWN_COLS, range(-before, after + 1)), thr)
+        left = kept(row_run_window(a, H_BAND, ti.static(range(1 - half, 1))), thr)
+        right = kept(0.0 - row_run_window(a, H_BAND, ti.static(range(1, half + 1))), thr)
+        up = kept(row_run_window(a, UP_COLS, ti.static(range(-before, after + 1))), thr)
+        down = kept(row_run_window(a, DOWN_COLS, ti.static(range(-before, after + 1))), thr)
         n = (ti.select(left > at, 1.0, 0.0) + ti.select(right > at, 1.0, 0.0) + ti.select(up > at, 1.0, 0.0)
              + ti.select(down > at, 1.0, 0.0))  # the strong arms
         q = left * right * up * down
