@@ -166,22 +166,28 @@ class Stage:
     it refreshes the ghost columns (``halo``) of the buffers it wrote. A stage with ``spans`` and no
     ``relax`` visits the same elements and does nothing else (a pass an update reads). A stage that
     ``marks`` a span group returns whether it changed anything at the cell (``a.any(...)``): those
-    elements become pending in both parities. The pixel layout visits every pixel and never freezes."""
+    elements become pending in both parities. The pixel layout visits every pixel and never freezes.
+
+    An update that writes a pair's ``before`` buffer itself (``turns``: the pairs; an iteration that is no
+    relaxation, or one that must keep its own order of operations) has its buffers alternated as a
+    relaxation's are, with no freezing; it lists the ``before`` buffers in ``ghosts``."""
 
     def __init__(self, fn, sums: str = "", maxes: str = "", ghosts=(), halo: "int | str" = 1, residuals: int = 0,
-                 relax=(), spans: "Span | None" = None, rows: "int | str" = 0, marks: "Span | None" = None):
+                 relax=(), spans: "Span | None" = None, rows: "int | str" = 0, marks: "Span | None" = None,
+                 turns=()):
         if sums and maxes:
             raise ValueError("a stage reduces by one kind (sums or maxes)")
-        relax = tuple(relax)
+        relax, turns = tuple(relax), tuple(turns)
         residuals = len(relax) or int(residuals)
         if residuals and (sums or maxes or residuals > 2):
             raise ValueError("an update stage returns its 1 or 2 residuals only")
         if marks is not None and (sums or maxes or relax or spans is not None):
             raise ValueError("a stage that marks spans returns whether it changed the cell only")
-        if any(p.buffers != 2 for p in relax) or (spans is not None and relax and spans.pair.slot != relax[0].slot):
+        if any(p.buffers != 2 for p in relax + turns) or (
+                spans is not None and relax and spans.pair.slot != relax[0].slot):
             raise ValueError("a relaxation updates pairs, and its spans follow its first pair")
         self.fn, self.ghosts, self.halo, self.residuals = fn, tuple(ghosts), halo, residuals
-        self.relax, self.spans, self.rows, self.marks = relax, spans, rows, marks
+        self.relax, self.spans, self.rows, self.marks, self.turns = relax, spans, rows, marks, turns
         self.marking = marks is not None
         self.results = tuple((sums or maxes).split())
         self.kind = "max" if maxes else "sum"
@@ -214,7 +220,7 @@ class Launch:
                 raise ValueError(f"{name}: a solve needs the launch scalars updates, tol, grow")
             self.controls = (scalars.updates.slot, scalars.tol.slot, scalars.grow.slot)
         #: the pairs the updates alternate (bits of the backend's parity mask)
-        self.alternates = tuple(sorted({p.bit for s in self.update for p in s.relax}))
+        self.alternates = tuple(sorted({p.bit for s in self.update for p in s.relax + s.turns}))
         self.tau = None
         if any(s.relax for s in self.update):
             if not hasattr(scalars, "tau"):
