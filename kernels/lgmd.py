@@ -11,7 +11,7 @@ Per frame:
 2. LGMD1 / LGMD2 ``layers``: the delayed 3x3 spreads or inhibitions and ``S`` (LGMD2: ``Ce``, result
    ``max_Ce``), then the grouping ``G`` (result ``sum_G``). F-LGMD ``solve``: the feedback updates (a solve
    launch, residuals of ON and OFF), then, when it converged, the layers at the fixed point (``finish``
-   computes them for a solve that did not); ``solve_on`` and ``finish_on`` where OFF is not iterated.
+   computes them for a solve that did not); ``solve_on`` where OFF is not iterated.
 
 Borders replicate, as in the authors' C# code. The NumPy float64 oracle of every stage is
 :mod:`cdnf_ti.baselines_reference`.
@@ -218,16 +218,16 @@ def lgmd2(ti, lanes: int) -> SimpleNamespace:
 # the iteration changes and the constant rest: S_X(X) = [W_x (*) X - Q]+ with W_x = G_e - w_i a K (K's centre
 # is 0) and Q = w_i sum K (1 - a) X(t-1), computed with the drives by the load.
 #: F-LGMD: photoreceptors; the settled channels ``ON``, ``OFF`` (the fixed point of the last computed frame);
-#: the drives ``ON0``, ``OFF0``; the constant inhibitions ``Q_on``, ``Q_off``; the iterates ``X_*`` (read by
-#: the even updates, the start) and ``Y_*`` (the odd ones); the layers at the fixed point.
-FLGMD_PLANES = Planes("L P ON OFF ON0 OFF0 Q_on Q_off X_on Y_on X_off Y_off S_on S_off S G")
+#: the drives ``ON0``, ``OFF0``; the constant inhibitions ``Q_on``, ``Q_off``; the iterates ``X_on``, ``X_off``
+#: (ping-pong pairs: an update writes ``before``, and the solve's updates alternate them); the layers at the
+#: fixed point.
+FLGMD_PLANES = Planes("L P ON OFF ON0 OFF0 Q_on Q_off X_on:2 X_off:2 S_on S_off S G")
 #: The input stage's ``clip``, ``dc``; the edge and diagonal weights ``w_i K (1 - a)`` of ``Q`` (ON, OFF);
 #: the iterate's start ``(w, kappa)`` of ON and OFF; the stencils ``W_x`` (centre, edge, diagonal) of ON and
 #: OFF; the feedback gains ``beta`` (ON, OFF); the summation threshold ``t_s``.
 FLGMD_COEFS = Coefs(clip=1, dc=1, q_on=2, q_off=2, start_on=2, start_off=2, w_on=3, w_off=3, beta=2, t_s=1)
-#: The load's ``scale``, ``keep``; the solve's updates at most, tolerance and growth limit; the updates of this
-#: frame run before this launch.
-FLGMD_SCALARS = Scalars("scale keep updates tol grow ran")
+#: The load's ``scale``, ``keep``; the solve's updates at most, tolerance and growth limit.
+FLGMD_SCALARS = Scalars("scale keep updates tol grow")
 
 
 @functools.lru_cache(maxsize=None)
@@ -237,15 +237,14 @@ def flgmd(ti, lanes: int) -> SimpleNamespace:
     F = _family(ti, lanes)
     pl, k, v = FLGMD_PLANES, FLGMD_COEFS, FLGMD_SCALARS
     mean9 = F.mean9_of(pl.S)
-    #: each channel's drive, constant inhibition, stencil, start, feedback gain (by index) and settled plane
-    channel = {"ON": (pl.ON0, pl.Q_on, k.w_on, k.q_on, k.start_on, 0, pl.ON),
-               "OFF": (pl.OFF0, pl.Q_off, k.w_off, k.q_off, k.start_off, 1, pl.OFF)}
-    iterates = {"ON": (pl.X_on, pl.Y_on), "OFF": (pl.X_off, pl.Y_off)}
-    channel_of = {x.name: channel[name] for name, pair in iterates.items() for x in pair}  # an iterate's channel
+    #: each channel's drive, constant inhibition, stencil, ``Q``'s weights, start, feedback gain (by index),
+    #: settled plane and iterate
+    channel = {"ON": (pl.ON0, pl.Q_on, k.w_on, k.q_on, k.start_on, 0, pl.ON, pl.X_on),
+               "OFF": (pl.OFF0, pl.Q_off, k.w_off, k.q_off, k.start_off, 1, pl.OFF, pl.X_off)}
 
-    def local_of(x):
-        """``(X, S_X = [W_x (*) X - Q]+)`` of the iterate ``x`` (its channel's ``W_x``, ``Q``): a ti.func of ``a``."""
-        q, w = channel_of[x.name][1], channel_of[x.name][2]
+    def local_of(name: str):
+        """``(X, S_X = [W_x (*) X - Q]+)`` of channel ``name``'s iterate (its ``W_x``, ``Q``): a ti.func of ``a``."""
+        q, w, x = channel[name][1], channel[name][2], channel[name][7]
 
         @ti.func
         def local(a: ti.template()):
@@ -257,8 +256,7 @@ def flgmd(ti, lanes: int) -> SimpleNamespace:
     def inputs(name: str):
         """The drive, ``Q`` and the iterate's start of the channel ``name`` from its drive (a ti.func of
         ``(a, drive)``)."""
-        x0, q, w, qk, sk, b, settled = channel[name]
-        start = iterates[name][0]
+        x0, q, w, qk, sk, b, settled, start = channel[name]
 
         @ti.func
         def prepare(a: ti.template()):
@@ -285,27 +283,30 @@ def flgmd(ti, lanes: int) -> SimpleNamespace:
         prepare_off(a)
         return drive
 
-    def relax_of(name: str, src, dst):
-        """One update of channel ``name``: iterate ``src`` into ``dst`` (a ti.func of ``a``; returns ``|T(X) - X|``)."""
-        x0, b, local = channel[name][0], channel[name][5], local_of(src)
+    def relax_of(name: str):
+        """One update of channel ``name``'s iterate (a ti.func of ``a``; returns ``|T(X) - X|``)."""
+        x0, b, local, it = channel[name][0], channel[name][5], local_of(name), channel[name][7]
 
         @ti.func
         def relax(a: ti.template()):
-            """``X_n = X + mom (X - X_n) + lam (T(X) - X)``, ``T(X) = [X0 + beta S_X(X)]+``."""
+            """``X_before = X + mom (X - X_before) + lam (T(X) - X)``, ``T(X) = [X0 + beta S_X(X)]+``."""
             x, s = local(a)
             d = ti.max(a.at(x0) + a.coef(k.beta, b) * s, 0.0) - x
-            a.put(dst, x + a.record(1) * (x - a.at(dst)) + a.record(0) * d)
+            a.put(it.before, x + a.record(1) * (x - a.at(it.before)) + a.record(0) * d)
             return F.lane_abs(d)
 
         return relax
 
-    relax_on, relax_on_back = relax_of("ON", pl.X_on, pl.Y_on), relax_of("ON", pl.Y_on, pl.X_on)
-    relax_off, relax_off_back = relax_of("OFF", pl.X_off, pl.Y_off), relax_of("OFF", pl.Y_off, pl.X_off)
+    relax_on, relax_off = relax_of("ON"), relax_of("OFF")
 
-    def settle_of(x):
-        """The channel's fixed point in the iterate ``x``, kept as its settled value; a ti.func of ``a`` returning
+    @ti.func
+    def relax_both(a: ti.template()):
+        return relax_on(a), relax_off(a)
+
+    def settle_of(name: str):
+        """Channel ``name``'s fixed point in its iterate, kept as its settled value; a ti.func of ``a`` returning
         its ``S_X``."""
-        local, settled = local_of(x), channel_of[x.name][6]
+        local, settled = local_of(name), channel[name][6]
 
         @ti.func
         def settle(a: ti.template()):
@@ -315,8 +316,16 @@ def flgmd(ti, lanes: int) -> SimpleNamespace:
 
         return settle
 
-    settle_on, settle_on_back = settle_of(pl.X_on), settle_of(pl.Y_on)
-    settle_off, settle_off_back = settle_of(pl.X_off), settle_of(pl.Y_off)
+    settle_on, settle_off = settle_of("ON"), settle_of("OFF")
+
+    @ti.func
+    def layers(a: ti.template()):
+        """``S_on``, ``S_off`` and ``S = S_on + S_off`` (kept where ``>= t_s``) at the fixed point."""
+        s_on, s_off = settle_on(a), settle_off(a)
+        a.put(pl.S_on, s_on)
+        a.put(pl.S_off, s_off)
+        s = s_on + s_off
+        a.put(pl.S, ti.select(s >= a.coef(k.t_s), s, 0.0))
 
     @ti.func
     def grouping(a: ti.template()):
@@ -325,49 +334,10 @@ def flgmd(ti, lanes: int) -> SimpleNamespace:
         a.put(pl.G, g)
         return g
 
-    def launches_of(with_off: bool, suffix: str) -> tuple[Launch, Launch]:
-        """The solve launch and the finish launch (named with ``suffix``) iterating ON, and OFF where ``with_off``
-        (else OFF is its drive: no update of its own, no ghost columns to refresh)."""
-
-        @ti.func
-        def update(a: ti.template()):
-            """Update ``ran + step`` of ON (and OFF where iterated); returns their residuals."""
-            r_on, r_off = a.zeros(), a.zeros()
-            if (a.step + ti.cast(a.value(v.ran), ti.i32)) % 2 == 0:
-                r_on = relax_on(a)
-                if ti.static(with_off):
-                    r_off = relax_off(a)
-            else:
-                r_on = relax_on_back(a)
-                if ti.static(with_off):
-                    r_off = relax_off_back(a)
-            return r_on, r_off
-
-        @ti.func
-        def layers(a: ti.template()):
-            """``S_on``, ``S_off`` and ``S = S_on + S_off`` (kept where ``>= t_s``) at the fixed point."""
-            odd = (a.step + ti.cast(a.value(v.ran), ti.i32)) % 2
-            s_on, s_off = a.zeros(), a.zeros()
-            if odd == 0:
-                s_on = settle_on(a)
-            else:
-                s_on = settle_on_back(a)
-            if ti.static(with_off):
-                if odd == 0:
-                    s_off = settle_off(a)
-                else:
-                    s_off = settle_off_back(a)
-            else:
-                s_off = settle_off(a)
-            a.put(pl.S_on, s_on)
-            a.put(pl.S_off, s_off)
-            s = s_on + s_off
-            a.put(pl.S, ti.select(s >= a.coef(k.t_s), s, 0.0))
-
-        after = (Stage(layers, ghosts=(pl.S, pl.ON, pl.OFF)), Stage(grouping, sums="sum_G"))
-        iterates = (pl.X_on, pl.Y_on, pl.X_off, pl.Y_off) if with_off else (pl.X_on, pl.Y_on)
-        step = Stage(update, residuals=2, ghosts=iterates)
-        return Launch("solve" + suffix, *after, update=(step,), scalars=v), Launch("finish" + suffix, *after)
-
+    after = (Stage(layers, ghosts=(pl.S, pl.ON, pl.OFF)), Stage(grouping, sums="sum_G"))
+    #: the solve iterating ON and OFF, and ``solve_on`` where OFF is its drive (no update of its own)
+    both = Stage(relax_both, residuals=2, turns=(pl.X_on, pl.X_off), ghosts=(pl.X_on.before, pl.X_off.before))
+    on = Stage(relax_on, residuals=1, turns=(pl.X_on,), ghosts=(pl.X_on.before,))
     load_launch = Launch("load", Stage(load, sums="sum_p", ghosts=(pl.X_on, pl.X_off)))
-    return engine.model(pl, k, v, F.E, load_launch, *launches_of(True, ""), *launches_of(False, "_on"))
+    return engine.model(pl, k, v, F.E, load_launch, Launch("solve", *after, update=(both,), scalars=v),
+                        Launch("solve_on", *after, update=(on,), scalars=v), Launch("finish", *after))

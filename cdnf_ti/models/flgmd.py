@@ -256,7 +256,7 @@ class FLGMDONn(LGMD1):
     #: The stages (``kernels/lgmd.py``): the load, the feedback solve and the layers at its fixed point.
     kernels = "lgmd:flgmd"
     #: The planes that :meth:`fields` leaves out (the solve's scratch).
-    hidden = ("L", "ON0", "OFF0", "Q_on", "Q_off", "X_on", "Y_on", "X_off", "Y_off")
+    hidden = ("L", "ON0", "OFF0", "Q_on", "Q_off", "X_on", "X_off")
 
     def coefficients(self) -> dict[str, object]:
         """The stages' coefficients by name (``kernels/lgmd.py``, ``FLGMD_COEFS``)."""
@@ -292,7 +292,7 @@ class FLGMDONn(LGMD1):
             be.prepare()
             iterate, many, steps = be.feedback_iterate, None, 1
         else:
-            self._ran, self._sum_g = 0, None
+            self._sum_g = None
             iterate, many, steps = self._iterate, self._iterate_many, UPDATES_PER_LAUNCH
         rep = solve_fixed_point(iterate, 2, tol=p.tol, max_iter=p.max_iter, damping=p.damping,
                                 min_damping=p.min_damping, stall_patience=p.stall_patience, bounds=self._bounds,
@@ -300,7 +300,7 @@ class FLGMDONn(LGMD1):
         if self.backend_name == "numpy":
             sum_g = be.finish()
         else:  # a solve launch that converged computed the layers; else the finish launch does
-            sum_g = self._sum_g if self._sum_g is not None else be.launch("finish" + self._launch, ran=self._ran)[0]
+            sum_g = self._sum_g if self._sum_g is not None else be.launch("finish")[0]
         extra = dict(iterations=max(rep.iterations), residual_on=rep.residuals[0], residual_off=rep.residuals[1])
         return sum_g, extra, rep.converged
 
@@ -313,8 +313,8 @@ class FLGMDONn(LGMD1):
         residuals are both ``<= tol``; that launch also computes the layers at the fixed point (``_sum_g``)."""
         p = self.params
         tol = float(np.float32(p.tol))  # the kernels' float32 tolerance
-        res, (sum_g,) = self._be.solve("solve" + self._launch, coefs, len(coefs), tol, RESTART_GROWTH,
-                                        ran=float(self._ran))
-        self._ran += len(res)
+        res, (sum_g,) = self._be.solve("solve" + self._launch, coefs, len(coefs), tol, RESTART_GROWTH)
+        if self._launch:  # OFF not iterated: its residual is 0
+            res = [(r[0], 0.0) for r in res]
         self._sum_g = sum_g if res and max(res[-1]) <= tol else None
         return res
