@@ -299,9 +299,18 @@ def flgmd(ti, lanes: int) -> SimpleNamespace:
 
     relax_on, relax_off = relax_of("ON"), relax_of("OFF")
 
-    @ti.func
-    def relax_both(a: ti.template()):
-        return relax_on(a), relax_off(a)
+    def update_of(with_off: bool):
+        """The update stage: ON, and OFF where ``with_off`` (else OFF is its drive: residual 0)."""
+
+        @ti.func
+        def update(a: ti.template()):
+            """One update of ON (and OFF); returns their residuals."""
+            r_on, r_off = relax_on(a), a.zeros()
+            if ti.static(with_off):
+                r_off = relax_off(a)
+            return r_on, r_off
+
+        return update
 
     def settle_of(name: str):
         """Channel ``name``'s fixed point in its iterate, kept as its settled value; a ti.func of ``a`` returning
@@ -336,8 +345,8 @@ def flgmd(ti, lanes: int) -> SimpleNamespace:
 
     after = (Stage(layers, ghosts=(pl.S, pl.ON, pl.OFF)), Stage(grouping, sums="sum_G"))
     #: the solve iterating ON and OFF, and ``solve_on`` where OFF is its drive (no update of its own)
-    both = Stage(relax_both, residuals=2, turns=(pl.X_on, pl.X_off), ghosts=(pl.X_on.before, pl.X_off.before))
-    on = Stage(relax_on, residuals=1, turns=(pl.X_on,), ghosts=(pl.X_on.before,))
+    both = Stage(update_of(True), residuals=2, turns=(pl.X_on, pl.X_off), ghosts=(pl.X_on.before, pl.X_off.before))
+    on = Stage(update_of(False), residuals=2, turns=(pl.X_on,), ghosts=(pl.X_on.before,))
     load_launch = Launch("load", Stage(load, sums="sum_p", ghosts=(pl.X_on, pl.X_off)))
     return engine.model(pl, k, v, F.E, load_launch, Launch("solve", *after, update=(both,), scalars=v),
                         Launch("solve_on", *after, update=(on,), scalars=v), Launch("finish", *after))

@@ -314,7 +314,5 @@ class FLGMDONn(LGMD1):
         p = self.params
         tol = float(np.float32(p.tol))  # the kernels' float32 tolerance
         res, (sum_g,) = self._be.solve("solve" + self._launch, coefs, len(coefs), tol, RESTART_GROWTH)
-        if self._launch:  # OFF not iterated: its residual is 0
-            res = [(r[0], 0.0) for r in res]
         self._sum_g = sum_g if res and max(res[-1]) <= tol else None
         return res
