@@ -13,7 +13,8 @@ A model's kernel module declares its names once and writes each stage once:
 
 The accessor's methods are the whole vocabulary of a stage: ``at``, ``put``, ``window3`` (centre, edge
 and diagonal sums of a 3x3 window), ``coef``, ``value`` (a launch scalar), ``grey`` / ``event`` (the
-input), ``result`` (an earlier stage's reduction in this launch), ``zeros``. Borders are engine
+input), ``result`` (an earlier stage's reduction in this launch), ``zeros``, ``put_prefix`` / ``row_sum`` (wide
+windows along a row from in-element prefix sums). Borders are engine
 options per plane (:func:`borders`): replicate, reflect-101 or zero outside, and the zero ring
 (the outermost ring set to 0 on every write).
 
@@ -343,6 +344,49 @@ def build(ti, lanes: int) -> SimpleNamespace:
         return v
 
     @ti.func
+    def _lane_prefix(v):
+        """Inclusive prefix sums of the lane vector ``v`` (``out[l] = v[0] + ... + v[l]``): log2(LANES) shifted adds."""
+        out = v
+        for s in ti.static([1 << b for b in range(LANES.bit_length() - 1)]):
+            shifted = _lane_zeros()
+            for q in ti.static(range(s, LANES)):
+                shifted[q] = out[q - s]
+            out = out + shifted
+        return out
+
+    @ti.func
+    def _lane_totals(x: ti.template(), k, i, e, m: ti.template()):
+        """The row's sum from the start of element ``e`` to the start of element ``e + m`` (negative for ``m < 0``):
+        the totals (last lanes) of the whole elements between, read from in-element prefixes."""
+        d = ti.f32(0.0)
+        for q in ti.static(range(min(m, 0), max(m, 0))):
+            d += x[k, i, e + q][LANES - 1]
+        if ti.static(m < 0):
+            d = -d
+        return d
+
+    @ti.func
+    def _lane_prefix_at(x: ti.template(), k, i, e, d: ti.template()):
+        """Per lane (column ``c``) of element ``e``: the row's sum up to column ``c + d`` inclusive, less its sum before
+        element ``e``, from the in-element prefixes of plane ``k`` (a few local numbers, no running total)."""
+        q = ti.static(d // LANES)
+        r = ti.static(d - q * LANES)
+        here = x[k, i, e + q] + _lane_totals(x, k, i, e, q)
+        out = here
+        if ti.static(r > 0):
+            out = C.lane_shift(here, here, x[k, i, e + q + 1] + _lane_totals(x, k, i, e, q + 1), r)
+        return out
+
+    @ti.func
+    def _pixel_row_sum(x: ti.template(), k, i, j, k0: ti.template(), k1: ti.template()):
+        """``sum_{d = k0 .. k1} x[k, i, j + d]`` (0 outside the frame), summed in float64 from ``k0``, as float32."""
+        s = ti.f64(0.0)
+        for run in ti.static(common.unrolled_runs(k1 - k0 + 1)):
+            for d in ti.static(run):
+                s += ti.cast(_pixel_at(x, k, i, j, ZERO, 0, k0 - 1 + d), ti.f64)
+        return ti.cast(s, ti.f32)
+
+    @ti.func
     def _lane_window3(x: ti.template(), k, i, e, mode: ti.template()):
         im, ip = _rows(i, x.shape[1], mode)
         return C.lane_edge_diag(x, k, im, i, ip, e)
@@ -557,6 +601,32 @@ def build(ti, lanes: int) -> SimpleNamespace:
                 _lane_put(self.x, self._k(plane), self.i, self.j, value, ring, self.spec)
             else:
                 _pixel_put(self.x, self._k(plane), self.i, self.j, value, ring)
+
+        @_dsl
+        def put_prefix(self, plane, value):
+            """Write ``value`` to ``plane`` for :meth:`row_sum`: on the lane layout as its in-element inclusive prefix
+            sums (the lanes past the frame's last column as 0), on the pixel layout as it is."""
+            if self.lane:
+                value = _lane_prefix(value * self.frame_mask())
+            self.put(plane, value)
+
+        @_dsl
+        def row_sum(self, plane, k0: int, k1: int):
+            """``sum_{d = k0 .. k1} plane(column + d)`` (compile-time ``k0 <= k1``; 0 outside the frame) of a plane of
+            the zero border written by :meth:`put_prefix`: on the lane layout the difference of two prefixes, each
+            read from at most two elements and the totals of the elements between (float32; ``k0 - 1`` and ``k1``
+            within the stage's ghost elements: give the stage ``halo >= max(1 - k0, k1)``); on the pixel layout
+            the terms summed in float64."""
+            if self.spec.border(plane) != (ZERO, False) or k0 > k1:
+                raise ValueError(f"row_sum of {plane.name}: a plane of the zero border (no ring), k0 <= k1")
+            if not self.lane:
+                return _pixel_row_sum(self.x, self._k(plane), self.i, self.j, k0, k1)
+            reach = max(-((k0 - 1) // LANES), k1 // LANES + (k1 % LANES > 0))  # elements read either side
+            if reach > self.spec.ghosts:
+                raise ValueError(f"row_sum of {plane.name} over {k0}..{k1} reads {reach} ghost elements, the launch "
+                                 f"has {self.spec.ghosts}: give the stage halo >= {max(1 - k0, k1)}")
+            k = self._k(plane)
+            return _lane_prefix_at(self.x, k, self.i, self.j, k1) - _lane_prefix_at(self.x, k, self.i, self.j, k0 - 1)
 
         @_dsl
         def coef(self, c, k=0):
