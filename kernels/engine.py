@@ -13,7 +13,8 @@ A model's kernel module declares its names once and writes each stage once:
 
 The accessor's methods are the whole vocabulary of a stage: ``at``, ``put``, ``window3`` (centre, edge
 and diagonal sums of a 3x3 window), ``coef``, ``value`` (a launch scalar), ``grey`` / ``event`` (the
-input), ``result`` (an earlier stage's reduction in this launch), ``zeros``, ``put_prefix`` / ``row_sum`` (wide
+input), ``result`` (an earlier stage's reduction in this launch), ``pick`` (a result set at one pixel), ``zeros``,
+``put_prefix`` / ``row_sum`` (wide
 windows along a row from in-element prefix sums). Borders are engine
 options per plane (:func:`borders`): replicate, reflect-101 or zero outside, and the zero ring
 (the outermost ring set to 0 on every write).
@@ -171,13 +172,19 @@ class Stage:
 
     An update that writes a pair's ``before`` buffer itself (``turns``: the pairs; an iteration that is no
     relaxation, or one that must keep its own order of operations) has its buffers alternated as a
-    relaxation's are, with no freezing; it lists the ``before`` buffers in ``ghosts``."""
+    relaxation's are, with no freezing; it lists the ``before`` buffers in ``ghosts``.
+
+    ``picks``: more results, each a value the stage sets at one frame pixel (``a.pick(name, value, row, column)``;
+    0 where no cell sets it), after the reductions in the launch's results."""
 
     def __init__(self, fn, sums: str = "", maxes: str = "", ghosts=(), halo: "int | str" = 1, residuals: int = 0,
                  relax=(), spans: "Span | None" = None, rows: "int | str" = 0, marks: "Span | None" = None,
-                 turns=()):
+                 turns=(), picks: str = ""):
         if sums and maxes:
             raise ValueError("a stage reduces by one kind (sums or maxes)")
+        self.picks = tuple(picks.split())
+        if self.picks and (residuals or relax or marks is not None or spans is not None):
+            raise ValueError("a stage that picks values is no update and visits every cell")
         relax, turns = tuple(relax), tuple(turns)
         residuals = len(relax) or int(residuals)
         if residuals and (sums or maxes or residuals > 2):
@@ -228,11 +235,11 @@ class Launch:
                 raise ValueError(f"{name}: a relaxation needs the launch scalar tau")
             self.tau = scalars.tau.slot
         stages = self.before + self.stages
-        self.results = tuple(r for s in stages for r in s.results)
+        self.results = tuple(r for s in stages for r in s.results + s.picks)
         if len(self.results) > MAX_RESULTS:
             raise ValueError(f"{name}: at most {MAX_RESULTS} results")
-        self.kinds = tuple(s.kind for s in stages for _ in s.results)
-        self.starts = tuple(0.0 if kind == "sum" else LOWEST for kind in self.kinds)
+        self.kinds = tuple(kind for s in stages for kind in (s.kind,) * len(s.results) + ("pick",) * len(s.picks))
+        self.starts = tuple(LOWEST if kind == "max" else 0.0 for kind in self.kinds)
 
     def slot(self, result: str) -> int:
         return self.results.index(result)
@@ -420,6 +427,19 @@ def build(ti, lanes: int) -> SimpleNamespace:
             col = (e - G) * LANES + q
             m[q] = ti.select(row & (col >= c0) & (col < c1), 1.0, 0.0)
         return m
+
+    @ti.func
+    def _lane_pick(slot: ti.template(), v, i, e, r, c, G: ti.template(), W: ti.template()):
+        """The result ``slot`` = the lane of ``v`` at frame pixel ``(r, c)`` if element ``(i, e)`` holds it."""
+        if (i == r) & ((e - G) * LANES <= c) & (c < ti.min((e - G + 1) * LANES, W)):
+            for q in ti.static(range(LANES)):
+                if (e - G) * LANES + q == c:
+                    res[slot] = ti.cast(v[q], ti.f64)
+
+    @ti.func
+    def _pixel_pick(slot: ti.template(), v, i, j, r, c):
+        if (i == r) & (j == c):
+            res[slot] = ti.cast(v, ti.f64)
 
     @ti.func
     def _pixel_within(i, j, r0, r1, c0, c1):
@@ -673,6 +693,15 @@ def build(ti, lanes: int) -> SimpleNamespace:
             """An earlier stage's reduction ``name`` in this launch (float64)."""
             k = self.spec.launch.slot(name)
             return self.got[k] if k < len(self.got) else _read(res, k)
+
+        @_dsl
+        def pick(self, name: str, value, r, c):
+            """Set the result ``name`` (one of the stage's ``picks``) to ``value`` at frame row ``r``, column ``c``:
+            the cell holding that pixel writes it (float64), the others nothing."""
+            if self.lane:
+                _lane_pick(self.spec.launch.slot(name), value, self.i, self.j, r, c, self.spec.ghosts, self.spec.W)
+            else:
+                _pixel_pick(self.spec.launch.slot(name), value, self.i, self.j, r, c)
 
         @_dsl
         def any(self, cond):
