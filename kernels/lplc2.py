@@ -9,16 +9,19 @@ Two launches, run by the engine (:mod:`cdnf_ti.kernels.engine`) in either layout
      ``F_d = a X + (1 - a) F_d(t-1)`` for X = ON, OFF;
    * ``motion``: the opponent motion of every detector pair on the (H-1, W-1) grid (ON and OFF summed):
      ``horizontal = leftward - rightward``, ``vertical = upward - downward`` (0 on the last row and column);
-   * ``columns``, ``arms``: the four radial-opponent half-plane arms of every unit as separable window sums
-     (a column pass, then a row pass; zero outside the grid, summed in float64), each kept where
-     ``> arm_t``, and ``lplc2 = |their product|`` where at least ``min_arms`` of them exceed ``strong_t``
-     (the unit rule: arena ``arm_t = strong_t = 2``, ``min_arms = 4``, i.e. the plain product; real-environment
-     ``arm_t = -2``, ``strong_t = 1.5``, ``min_arms = 3``); results ``active`` (units > 0) and ``core`` (the
-     centre unit's response), then the centre unit's four arms (``centre_lr``, ``centre_ud``).
+   * ``column_runs``, ``columns``, ``arms``: the four radial-opponent half-plane arms of every unit as separable
+     window sums (a column pass, then a row pass; zero outside the grid), each kept where ``> arm_t``, and
+     ``lplc2 = |their product|`` where at least ``min_arms`` of them exceed ``strong_t`` (the unit rule: arena
+     ``arm_t = strong_t = 2``, ``min_arms = 4``, i.e. the plain product; real-environment ``arm_t = -2``,
+     ``strong_t = 1.5``, ``min_arms = 3``); results ``active`` (units > 0), then, picked at the centre unit, its
+     response ``core`` and its four arms ``left``, ``right``, ``up``, ``down``.
 
-The window geometry (``half``, ``before``, ``after``) is compile-time (the model's ``kernel_options()``); the row
-pass reads up to ``reach`` columns either side (the engine's wide ghosts). The giant fibre is the model's
-(:class:`cdnf_ti.models.lplc2.LPLC2`). The float64 oracle: :class:`cdnf_ti.lplc2_reference.LPLC2Reference`.
+The pixel layout sums every window in float64. The lane layout sums in float32: a column window from sums of runs
+of :data:`RUN` rows (``column_runs``) and single rows, a row window as the difference of two in-element prefix sums
+(the engine's ``put_prefix`` / ``row_sum``). The window geometry (``half``, ``before``, ``after``) is compile-time
+(the model's ``kernel_options()``); the row pass reads up to ``reach`` columns either side (the engine's ghosts).
+The giant fibre is the model's (:class:`cdnf_ti.models.lplc2.LPLC2`). The float64 oracle:
+:class:`cdnf_ti.lplc2_reference.LPLC2Reference`.
 """
 
 import functools
@@ -27,18 +30,18 @@ from types import SimpleNamespace
 from . import engine
 from .engine import Coefs, Launch, Planes, Scalars, Stage
 
-# "_": scratch, not among the fields: luminance, high-pass, delayed ON / OFF, the column passes
+# "_": scratch, not among the fields: luminance, high-pass, delayed ON / OFF, the column passes, the runs
 PLANES = Planes("_L _Fh _Fon _Foff horizontal vertical _h_band _up_cols _down_cols left right up down lplc2 "
-                "_hor_end _hor_start _ver_end _ver_start _h_end _h_start _up_end _up_start _down_end _down_start")
+                "_hor_end _hor_start _ver_end _ver_start")
 #: High-pass ``b``, low-pass ``a``, ON / OFF thresholds; the unit rule: an arm is kept above ``arm_t``, a unit needs
 #: ``min_arms`` arms above ``strong_t``; the grid (rows, columns) and its centre unit.
 COEFS = Coefs(b_high=1, a_low=1, on_t=1, off_t=1, arm_t=1, strong_t=1, min_arms=1, grid=2, core=2)
 #: The frame's grey scale: ``L = frame / denom``.
 SCALARS = Scalars("denom")
 (L, FH, FD_ON, FD_OFF, HOR, VER, H_BAND, UP_COLS, DOWN_COLS, LEFT, RIGHT, UP, DOWN, LPLC2, *RUNS) = PLANES
-#: The lane layout's runs of each window's plane: (the sums of RUN lines ending here, starting here).
-RUNS_OF = {plane.name: (RUNS[2 * k], RUNS[2 * k + 1]) for k, plane in enumerate((HOR, VER, H_BAND, UP_COLS, DOWN_COLS))}
-#: Rows or columns per run of the lane layout's passes: a window is whole runs (their sums) and single lines.
+#: The lane layout's runs of each motion map: (the sums of RUN rows ending here, starting here).
+RUNS_OF = {plane.name: (RUNS[2 * k], RUNS[2 * k + 1]) for k, plane in enumerate((HOR, VER))}
+#: Rows per run of the lane layout's column pass: a window is whole runs (their sums) and single rows.
 RUN = 8
 K, V = COEFS, SCALARS
 
@@ -94,83 +97,59 @@ def build(ti, lanes: int) -> SimpleNamespace:
         a.put(HOR, (left - right) * inside)
         a.put(VER, (up - down) * inside)
 
-    def sums_along(along: int):
-        """The window sums along columns (``along`` 0: row offsets) or rows (1: column offsets): ``window(a, plane,
-        offsets)``, ``run_window(a, plane, offsets)`` (``offsets``: a range of offsets ``k0 .. k1``)."""
-
-        @ti.func
-        def window(a: ti.template(), plane: ti.template(), offsets: ti.template()):
-            """``sum_k plane`` at the ``offsets`` as float32: summed in float64 on the pixel layout, in float32 on
-            the lane layout (whose vectors the compilers do not widen)."""
-            s = a.zeros()
-            if ti.static(a.lane):
-                for run in ti.static(runs(offsets.start, offsets.stop - 1)):
-                    for k in ti.static(run):
-                        s += a.at(plane, k * (1 - along), k * along)
-            else:
-                s64 = ti.f64(0.0)
-                for run in ti.static(runs(offsets.start, offsets.stop - 1)):
-                    for k in ti.static(run):
-                        s64 += ti.cast(a.at(plane, k * (1 - along), k * along), ti.f64)
-                s = ti.cast(s64, ti.f32)
-            return s
-
-        @ti.func
-        def run_window(a: ti.template(), plane: ti.template(), offsets: ti.template()):
-            """``window``; on the lane layout from whole runs of :data:`RUN` lines (:func:`runs_of`) and the lines
-            left over: runs ending at or before the cell for offsets <= 0, runs starting after it for offsets > 0
-            (a run read outside the frame then lies wholly outside it: 0, as its zero border gives)."""
-            s = a.zeros()
-            k0, k1 = ti.static(offsets.start, offsets.stop - 1)
-            if ti.static(a.lane):
-                end, start = ti.static(RUNS_OF[plane.name])
-                if ti.static(k0 <= 0):
-                    lo = ti.static(min(k1, 0))
-                    whole = ti.static((lo - k0 + 1) // RUN)
-                    for q in ti.static(range(whole)):
-                        s += a.at(end, (lo - q * RUN) * (1 - along), (lo - q * RUN) * along)
-                    for k in ti.static(range(k0, lo - whole * RUN + 1)):
-                        s += a.at(plane, k * (1 - along), k * along)
-                if ti.static(k1 > 0):
-                    hi = ti.static(max(k0, 1))
-                    whole = ti.static((k1 - hi + 1) // RUN)
-                    for q in ti.static(range(whole)):
-                        s += a.at(start, (hi + q * RUN) * (1 - along), (hi + q * RUN) * along)
-                    for k in ti.static(range(hi + whole * RUN, k1 + 1)):
-                        s += a.at(plane, k * (1 - along), k * along)
-            else:
-                s = window(a, plane, offsets)
-            return s
-
-        return window, run_window
-
-    (column_window, column_run_window), (row_window, row_run_window) = sums_along(0), sums_along(1)
-    ending, starting = range(1 - RUN, 1), range(0, RUN)  # the runs' offsets
+    @ti.func
+    def column_window(a: ti.template(), plane: ti.template(), offsets: ti.template()):
+        """``sum_k plane`` at the row ``offsets`` (a range ``k0 .. k1``) as float32, summed in float64 on the pixel
+        layout; on the lane layout in float32 from whole runs of :data:`RUN` rows (:func:`column_runs`) and the rows
+        left over: runs ending at or before the cell for offsets <= 0, runs starting after it for offsets > 0 (a
+        run read outside the frame then lies wholly outside it: 0, as its zero border gives)."""
+        s = a.zeros()
+        k0, k1 = ti.static(offsets.start, offsets.stop - 1)
+        if ti.static(a.lane):
+            end, start = ti.static(RUNS_OF[plane.name])
+            if ti.static(k0 <= 0):
+                lo = ti.static(min(k1, 0))
+                whole = ti.static((lo - k0 + 1) // RUN)
+                for q in ti.static(range(whole)):
+                    s += a.at(end, lo - q * RUN)
+                for k in ti.static(range(k0, lo - whole * RUN + 1)):
+                    s += a.at(plane, k)
+            if ti.static(k1 > 0):
+                hi = ti.static(max(k0, 1))
+                whole = ti.static((k1 - hi + 1) // RUN)
+                for q in ti.static(range(whole)):
+                    s += a.at(start, hi + q * RUN)
+                for k in ti.static(range(hi + whole * RUN, k1 + 1)):
+                    s += a.at(plane, k)
+        else:
+            s64 = ti.f64(0.0)
+            for run in ti.static(runs(k0, k1)):
+                for k in ti.static(run):
+                    s64 += ti.cast(a.at(plane, k), ti.f64)
+            s = ti.cast(s64, ti.f32)
+        return s
 
     @ti.func
     def column_runs(a: ti.template()):
         """The lane layout's sums of :data:`RUN` rows ending here and starting here, of the motion maps."""
         if ti.static(a.lane):
             for plane in ti.static((HOR, VER)):
-                for run, offsets in ti.static(zip(RUNS_OF[plane.name], (ending, starting))):
-                    a.put(run, column_window(a, plane, offsets))
-
-    @ti.func
-    def row_runs(a: ti.template()):
-        """The lane layout's sums of :data:`RUN` columns ending here and starting here, of the column passes."""
-        if ti.static(a.lane):
-            for plane in ti.static((H_BAND, UP_COLS, DOWN_COLS)):
-                for run, offsets in ti.static(zip(RUNS_OF[plane.name], (ending, starting))):
-                    a.put(run, row_window(a, plane, offsets))
+                end, start = ti.static(RUNS_OF[plane.name])
+                ending, starting = a.zeros(), a.zeros()
+                for k in ti.static(range(RUN)):
+                    ending += a.at(plane, k - RUN + 1)
+                    starting += a.at(plane, k)
+                a.put(end, ending)
+                a.put(start, starting)
 
     @ti.func
     def columns(a: ti.template()):
-        """The column passes: ``horizontal`` over the band rows, ``vertical`` over the half-fields above
-        (up) and below (down, negated)."""
+        """The column passes: ``horizontal`` over the band rows, ``vertical`` over the half-fields above (up) and
+        below (down, negated); kept for the row passes (:meth:`put_prefix`)."""
         half, before, after = ti.static(a.option("half"), a.option("before"), a.option("after"))
-        a.put(H_BAND, column_run_window(a, HOR, ti.static(range(-before, after + 1))))
-        a.put(UP_COLS, column_run_window(a, VER, ti.static(range(1 - half, 1))))
-        a.put(DOWN_COLS, 0.0 - column_run_window(a, VER, ti.static(range(1, half + 1))))
+        a.put_prefix(H_BAND, column_window(a, HOR, ti.static(range(-before, after + 1))))
+        a.put_prefix(UP_COLS, column_window(a, VER, ti.static(range(1 - half, 1))))
+        a.put_prefix(DOWN_COLS, 0.0 - column_window(a, VER, ti.static(range(1, half + 1))))
 
     @ti.func
     def kept(arm, threshold):
@@ -180,44 +159,31 @@ def build(ti, lanes: int) -> SimpleNamespace:
     @ti.func
     def arms(a: ti.template()):
         """The row passes: the four kept arms and the unit rule (``|their product|`` where at least ``min_arms`` of
-        them are strong); returns (unit active, centre response)."""
+        them are strong); returns whether the unit is active, picks the centre unit's response and arms."""
         half, before, after = ti.static(a.option("half"), a.option("before"), a.option("after"))
         thr, at, inside = a.coef(K.arm_t), a.coef(K.strong_t), grid(a)
-        left = kept(row_run_window(a, H_BAND, ti.static(range(1 - half, 1))), thr)
-        right = kept(0.0 - row_run_window(a, H_BAND, ti.static(range(1, half + 1))), thr)
-        up = kept(row_run_window(a, UP_COLS, ti.static(range(-before, after + 1))), thr)
-        down = kept(row_run_window(a, DOWN_COLS, ti.static(range(-before, after + 1))), thr)
+        left = kept(a.row_sum(H_BAND, 1 - half, 0), thr)
+        right = kept(0.0 - a.row_sum(H_BAND, 1, half), thr)
+        up = kept(a.row_sum(UP_COLS, -before, after), thr)
+        down = kept(a.row_sum(DOWN_COLS, -before, after), thr)
         n = (ti.select(left > at, 1.0, 0.0) + ti.select(right > at, 1.0, 0.0) + ti.select(up > at, 1.0, 0.0)
              + ti.select(down > at, 1.0, 0.0))  # the strong arms
         q = left * right * up * down
         p = ti.max(q, 0.0 - q) * ti.select(n >= a.coef(K.min_arms), inside, 0.0)  # |q| where n is enough
+        cy, cx = ti.cast(a.coef(K.core, 0), ti.i32), ti.cast(a.coef(K.core, 1), ti.i32)
         a.put(LEFT, left * inside)
         a.put(RIGHT, right * inside)
         a.put(UP, up * inside)
         a.put(DOWN, down * inside)
         a.put(LPLC2, p)
-        return ti.select(p > 0.0, 1.0, 0.0), p * centre(a)
-
-    @ti.func
-    def centre(a: ti.template()):
-        """1 at the centre unit, else 0."""
-        cy, cx = ti.cast(a.coef(K.core, 0), ti.i32), ti.cast(a.coef(K.core, 1), ti.i32)
-        return a.within(cy, cy + 1, cx, cx + 1)
-
-    @ti.func
-    def centre_lr(a: ti.template()):
-        """The centre unit's left and right arms."""
-        return a.at(LEFT) * centre(a), a.at(RIGHT) * centre(a)
-
-    @ti.func
-    def centre_ud(a: ti.template()):
-        """The centre unit's up and down arms."""
-        return a.at(UP) * centre(a), a.at(DOWN) * centre(a)
+        a.pick("core", p, cy, cx)
+        a.pick("left", left, cy, cx)
+        a.pick("right", right, cy, cx)
+        a.pick("up", up, cy, cx)
+        a.pick("down", down, cy, cx)
+        return ti.select(p > 0.0, 1.0, 0.0)
 
     first = Launch("store", Stage(store))
     frame = Launch("frame", Stage(filters, ghosts=(FH, FD_ON, FD_OFF)), Stage(motion), Stage(column_runs),
-                   Stage(columns, ghosts=(H_BAND, UP_COLS, DOWN_COLS), halo="reach"),
-                   Stage(row_runs, ghosts=RUNS[4:], halo="reach"),
-                   Stage(arms, sums="active core"), Stage(centre_lr, sums="left right"),
-                   Stage(centre_ud, sums="up down"))
+                   Stage(columns), Stage(arms, sums="active", picks="core left right up down", halo="reach"))
     return engine.model(PLANES, COEFS, SCALARS, engine.build(ti, lanes), first, frame)

@@ -206,14 +206,15 @@ class LPLC2(Model):
                     grid=(self.shape[0] - 1, self.shape[1] - 1), core=core_unit(self.shape), **rule)
 
     def kernel_options(self) -> dict[str, int]:
-        """The arms' window geometry (px), compiled in; ``reach``: the farthest column a row window reads."""
+        """The arms' window geometry (px), compiled in; ``reach``: the farthest column a row window's prefix sums read
+        (the column before the window and its last one)."""
         half, before, after = int(self.params.half_side), int(self.params.band_before), int(self.params.band_after)
-        return dict(half=half, before=before, after=after, reach=max(half, before, after))
+        return dict(half=half, before=before, after=after, reach=max(half, before + 1, after))
 
     def borders(self) -> dict[str, str]:
         """The motion maps and their column passes count zero outside the grid."""
-        return dict.fromkeys(("horizontal vertical _h_band _up_cols _down_cols _hor_end _hor_start _ver_end _ver_start "
-                              "_h_end _h_start _up_end _up_start _down_end _down_start").split(), "zero")
+        return dict.fromkeys("horizontal vertical _h_band _up_cols _down_cols _hor_end _hor_start _ver_end _ver_start"
+                             .split(), "zero")
 
     def _reset_state(self) -> None:
         self.v, self.active_prev = self.params.v_rest, None  # active_prev: the last frame's active units
