@@ -138,12 +138,13 @@ def build(ti, lanes: int) -> SimpleNamespace:
         s = a.zeros()
         if a.any(loud > 0.0):
             high, mid, low = a.at(RH), a.at(RM), a.at(RL)
-            if ti.static(a.lane):  # float64 element by element (the lane vector types have none)
-                # every lane, no branch, each result built as one vector (quadrants' comprehensions see locals only)
-                pixel, n = ti.static(exact, lanes)
-                lane = [pixel(a.coefs, g[q], high[q], mid[q], low[q], first, levels, loud[q])
-                        for q in ti.static(range(n))]
-                s, high, mid, low = [ti.Vector([v[k] for v in lane], dt=ti.f32) for k in ti.static(range(4))]
+            if ti.static(a.lane):  # float64 element by element (the lane vector types have none), by groups of 8
+                for b in ti.static(range(0, lanes, 8)):  # a group with a pixel outside its band: all 8, no branch
+                    if ti.max(*[loud[q] for q in ti.static(range(b, b + 8))]) > 0.0:
+                        for q in ti.static(range(b, b + 8)):
+                            v = exact(a.coefs, g[q], high[q], mid[q], low[q], first, levels, loud[q])
+                            for k, w in ti.static(enumerate((s, high, mid, low))):
+                                w[q] = v[k]
             else:
                 s, high, mid, low = exact(a.coefs, g, high, mid, low, first, levels, loud)
             g_lo, g_hi = band(a.coefs, high, levels)
@@ -153,7 +154,8 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
     @ti.func
     def signed_map(a: ti.template()):
-        """``X.now``: the sign of ``p_on - p_off`` of an event bin, or the emulator's map of a frame."""
+        """``X.now``: the sign of ``p_on - p_off`` of an event bin, or the emulator's map of a frame; and the row
+        passes ``g (*)_x X_q(t-1)``, ``x g (*)_x X_q(t-1)`` of each polarity (ON: ``X > 0``, OFF: ``X < 0``)."""
         s = a.zeros()
         if ti.static(a.events):
             p_on, p_off = a.event(0), a.event(1)
@@ -161,10 +163,6 @@ def build(ti, lanes: int) -> SimpleNamespace:
         else:
             s = emulate(a)
         a.put(X.now, s)
-
-    @ti.func
-    def row_passes(a: ti.template()):
-        """``g (*)_x X_q(t-1)`` and ``x g (*)_x X_q(t-1)`` of each polarity (ON: ``X > 0``, OFF: ``X < 0``)."""
         R = ti.static(a.option("radius"))
         for q in ti.static(range(2)):
             n, x = a.zeros(), a.zeros()
@@ -178,20 +176,19 @@ def build(ti, lanes: int) -> SimpleNamespace:
     @ti.func
     def flow(a: ti.template()):
         """``v = v^on + v^off``, ``v^q = -X_q(t) (K_x, K_y) dt / (reg + dt^2 K_n)`` from the row passes of
-        ``X_q(t-1)``, and ``v_r``; returns the left and right sums of ``v_r w_pos`` (summed)."""
+        ``X_q(t-1)``, and ``v_r``; returns the left and right sums of ``v_r w_pos`` (summed). A pixel has one
+        polarity (``X(t)`` is 1, -1 or 0): the column passes take the row passes of its own (the other's term
+        is 0)."""
         R = ti.static(a.option("radius"))
         x, dt = a.at(X.now), a.coef(K.dt)
-        vx, vy = a.zeros(), a.zeros()
-        for q in ti.static(range(2)):
-            kn, kx, ky = a.zeros(), a.zeros(), a.zeros()
-            for d in ti.static(range(-R, R + 1)):
-                g, n = a.coef(K.taps, d + R), a.at(ROWS[q][0], d, 0)
-                kn += g * n
-                ky += a.coef(K.taps, 2 * R + 1 + d + R) * n
-                kx += g * a.at(ROWS[q][1], d, 0)
-            scale = ti.max(x * (1.0 - 2.0 * q), 0.0) * (0.0 - dt) / (a.coef(K.reg) + dt * dt * kn)
-            vx += kx * scale
-            vy += ky * scale
+        kn, kx, ky = a.zeros(), a.zeros(), a.zeros()
+        for d in ti.static(range(-R, R + 1)):
+            g, n = a.coef(K.taps, d + R), ti.select(x > 0.0, a.at(NP, d, 0), a.at(NN, d, 0))
+            kn += g * n
+            ky += a.coef(K.taps, 2 * R + 1 + d + R) * n
+            kx += g * ti.select(x > 0.0, a.at(XP, d, 0), a.at(XN, d, 0))
+        scale = x * x * (0.0 - dt) / (a.coef(K.reg) + dt * dt * kn)  # X(t)^2 = |X(t)|
+        vx, vy = kx * scale, ky * scale
         wx, wy, left = radial(a)
         vr = vx * wx + vy * wy
         for plane, v in ti.static(((VX, vx), (VY, vy), (VR, vr))):
@@ -199,6 +196,5 @@ def build(ti, lanes: int) -> SimpleNamespace:
         return vr * a.at(WP) * left, vr * a.at(WP) * (1.0 - left)
 
     setup = Launch("setup", Stage(weights))
-    load = Launch("load", Stage(signed_map, ghosts=(X.now,), halo="radius"))
-    flow_launch = Launch("flow", Stage(row_passes), Stage(flow, sums="left right"))
-    return engine.model(PLANES, COEFS, SCALARS, engine.build(ti, lanes), setup, load, flow_launch)
+    step = Launch("step", Stage(signed_map, ghosts=(X.now,), halo="radius"), Stage(flow, sums="left right"))
+    return engine.model(PLANES, COEFS, SCALARS, engine.build(ti, lanes), setup, step)
