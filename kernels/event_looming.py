@@ -138,13 +138,12 @@ def build(ti, lanes: int) -> SimpleNamespace:
         s = a.zeros()
         if a.any(loud > 0.0):
             high, mid, low = a.at(RH), a.at(RM), a.at(RL)
-            if ti.static(a.lane):  # float64 element by element (the lane vector types have none), by groups of 8
-                for b in ti.static(range(0, lanes, 8)):  # a group with a pixel outside its band: all 8, no branch
-                    if ti.max(*[loud[q] for q in ti.static(range(b, b + 8))]) > 0.0:
-                        for q in ti.static(range(b, b + 8)):
-                            v = exact(a.coefs, g[q], high[q], mid[q], low[q], first, levels, loud[q])
-                            for k, w in ti.static(enumerate((s, high, mid, low))):
-                                w[q] = v[k]
+            if ti.static(a.lane):  # float64 element by element (the lane vector types have none)
+                # every lane, no branch, each result built as one vector (quadrants' comprehensions see locals only)
+                pixel, n = ti.static(exact, lanes)
+                lane = [pixel(a.coefs, g[q], high[q], mid[q], low[q], first, levels, loud[q])
+                        for q in ti.static(range(n))]
+                s, high, mid, low = [ti.Vector([v[k] for v in lane], dt=ti.f32) for k in ti.static(range(4))]
             else:
                 s, high, mid, low = exact(a.coefs, g, high, mid, low, first, levels, loud)
             g_lo, g_hi = band(a.coefs, high, levels)
