@@ -19,7 +19,8 @@ Two launches, run by the engine (:mod:`cdnf_ti.kernels.engine`) in either layout
      float frames take ``ln`` on the pixels outside the band only). The same stage makes the row passes of the
      last map, per polarity ``q``: ``g (*)_x X_q(t-1)``, ``x g (*)_x X_q(t-1)`` (zero padding).
    * the column passes ``K_n``, ``K_x``, ``K_y`` of the separable (2 R + 1)^2 correlations (5x5) of ``X_q(t-1)``
-     for the polarity ``q`` of the pixel's own event only (the other's term is 0);
+     for the polarity ``q`` of the pixel's own event only (the other's term is 0; a lane vector without events
+     has no flow and skips them);
      ``v = -|X(t)| (K_x, K_y) dt / (reg + dt^2 K_n)``, ``v_r = v_x w_x + v_y w_y``; results the left and right
      sums of ``v_r w_pos``.
 
@@ -44,8 +45,6 @@ COEFS = Coefs(emulator=9, levels=768, dt=1, reg=1, sigma_pos=1, taps=0)
 SCALARS = Scalars("levels first width height half")
 X, VX, VY, VR, RH, RM, RL, LO, HI, NP, XP, NN, XN, WP = PLANES
 K, V = COEFS, SCALARS
-#: Each polarity's row passes (``g``, ``x g``).
-ROWS = ((NP, XP), (NN, XN))
 
 
 @functools.lru_cache(maxsize=None)
@@ -128,10 +127,9 @@ def build(ti, lanes: int) -> SimpleNamespace:
             level = level_of(coefs, g, ref, levels, loud)
         ref = ti.select(first != 0.0, level, ref)
         d = level - ref  # ref - level is -d exactly: the emulator's n_on, n_off from one division
-        up = d > 0.0
-        n = cast(cast(ti.max(d, 0.0 - d) / ti.select(up, c_on, c_off), ti.i64, lane), ti.f64, lane)  # floor (>= 0)
-        high, mid, low = f32_parts(ref + n * ti.select(up, c_on, 0.0 - c_off), lane)
-        return cast(ti.select(n < 1.0, 0.0, ti.select(up, 1.0, -1.0)), ti.f32, lane), high, mid, low
+        n = cast(cast(ti.max(d, 0.0 - d) / ti.select(d > 0.0, c_on, c_off), ti.i64, lane), ti.f64, lane)  # floor
+        high, mid, low = f32_parts(ref + n * ti.select(d > 0.0, c_on, 0.0 - c_off), lane)
+        return cast(ti.select(n < 1.0, 0.0, ti.select(d > 0.0, 1.0, -1.0)), ti.f32, lane), high, mid, low
 
     @ti.func
     def exp32(x):
@@ -185,25 +183,27 @@ def build(ti, lanes: int) -> SimpleNamespace:
                 v = ti.max(a.at(X.before, 0, d) * (1.0 - 2.0 * q), 0.0)
                 n += a.coef(K.taps, d + R) * v
                 x += a.coef(K.taps, 2 * R + 1 + d + R) * v
-            a.put(ROWS[q][0], n)
-            a.put(ROWS[q][1], x)
+            a.put((NP, NN)[q], n)  # each polarity's row passes (g, x g)
+            a.put((XP, XN)[q], x)
 
     @ti.func
     def flow(a: ti.template()):
         """``v = v^on + v^off``, ``v^q = -X_q(t) (K_x, K_y) dt / (reg + dt^2 K_n)`` from the row passes of
         ``X_q(t-1)``, and ``v_r``; returns the left and right sums of ``v_r w_pos`` (summed). A pixel has one
         polarity (``X(t)`` is 1, -1 or 0): the column passes take the row passes of its own (the other's term
-        is 0)."""
+        is 0); a cell without events has none."""
         R = ti.static(a.option("radius"))
         x, dt = a.at(X.now), a.coef(K.dt)
-        kn, kx, ky = a.zeros(), a.zeros(), a.zeros()
-        for d in ti.static(range(-R, R + 1)):
-            g, n = a.coef(K.taps, d + R), ti.select(x > 0.0, a.at(NP, d, 0), a.at(NN, d, 0))
-            kn += g * n
-            ky += a.coef(K.taps, 2 * R + 1 + d + R) * n
-            kx += g * ti.select(x > 0.0, a.at(XP, d, 0), a.at(XN, d, 0))
-        scale = x * x * (0.0 - dt) / (a.coef(K.reg) + dt * dt * kn)  # X(t)^2 = |X(t)|
-        vx, vy = kx * scale, ky * scale
+        vx, vy = a.zeros(), a.zeros()
+        if a.any(x != 0.0):
+            kn, kx, ky = a.zeros(), a.zeros(), a.zeros()
+            for d in ti.static(range(-R, R + 1)):
+                g, n = a.coef(K.taps, d + R), ti.select(x > 0.0, a.at(NP, d, 0), a.at(NN, d, 0))
+                kn += g * n
+                ky += a.coef(K.taps, 2 * R + 1 + d + R) * n
+                kx += g * ti.select(x > 0.0, a.at(XP, d, 0), a.at(XN, d, 0))
+            scale = x * x * (0.0 - dt) / (a.coef(K.reg) + dt * dt * kn)  # X(t)^2 = |X(t)|
+            vx, vy = kx * scale, ky * scale
         wx, wy, left = radial(a)
         vr = vx * wx + vy * wy
         for plane, v in ti.static(((VX, vx), (VY, vy), (VR, vr))):
