@@ -1,24 +1,28 @@
 """The event-based looming detector's stages (Schubert, Knight, Philippides, Nowotny 2025; its model:
 ``cdnf_ti.models.event_looming``).
 
-Three launches, run by the engine (:mod:`cdnf_ti.kernels.engine`) in either layout:
+Two launches, run by the engine (:mod:`cdnf_ti.kernels.engine`) in either layout:
 
 1. ``setup`` (the first bin of a run): the Gaussian ``w_pos`` of the positions ``w_x`` (-1..1 across the
    columns) and ``w_y`` (``-H/W..H/W`` down the rows).
-2. ``load``: the signed event map ``X`` in {-1, 0, 1} of this bin. On an event bin ``(p_on, p_off)``: the sign
-   of ``p_on - p_off``. On a frame: the project's DVS emulator with its default pixel (no mismatch, no
-   refractory period, no noise), in float64: ``l = ln(g / 255 + eps)``, ``n_on = floor([l - r]^+ / C_on)``,
-   ``n_off = floor([r - l]^+ / C_off)``, ``r += n_on C_on - n_off C_off``; ``X = +1`` where ``n_on >= 1``,
-   ``-1`` where ``n_off >= 1``. The reference level ``r`` is a float64 kept exactly as three float32 planes,
-   so the events are the float64 emulator's. A pixel whose grey lies inside the band ``(g_lo, g_hi)`` of
-   its ``r`` cannot cross (float32 bounds from a polynomial ``e^x``, narrowed by margins 25 times its error): the
-   float64 work runs only where a cell has a pixel outside its band, on all the cell's lanes without a branch
-   (a quiet pixel gets 0 and keeps its ``r``; uint8 frames read ``l`` from the table, float frames take ``ln``
-   on the pixels outside the band only).
-3. ``flow``: per polarity ``q`` the separable (2 R + 1)^2 correlations (5x5) (zero padding) of ``X_q(t-1)``: row passes
-   ``g (*)_x X_q``, ``x g (*)_x X_q``, then the column pass ``K_n``, ``K_x``, ``K_y``;
-   ``v^q = -X_q(t) (K_x, K_y) dt / (reg + dt^2 K_n)``, ``v_r = v_x w_x + v_y w_y``; results the
-   left and right sums of ``v_r w_pos``.
+2. ``step`` (every bin), two stages:
+
+   * the signed event map ``X`` in {-1, 0, 1} of this bin. On an event bin ``(p_on, p_off)``: the sign of
+     ``p_on - p_off``. On a frame: the project's DVS emulator with its default pixel (no mismatch, no refractory
+     period, no noise), in float64: ``l = ln(g / 255 + eps)``, ``n_on = floor([l - r]^+ / C_on)``,
+     ``n_off = floor([r - l]^+ / C_off)``, ``r += n_on C_on - n_off C_off``; ``X = +1`` where ``n_on >= 1``,
+     ``-1`` where ``n_off >= 1``. The reference level ``r`` is a float64 kept exactly as three float32 planes,
+     so the events are the float64 emulator's. A pixel whose grey lies inside the band ``(g_lo, g_hi)`` of its
+     ``r`` cannot cross (float32 bounds from a polynomial ``e^x``, narrowed by margins 25 times its error): the
+     float64 work runs only where a cell has a pixel outside its band, on the whole lane vector as float64
+     vectors without a branch (a quiet pixel gets 0 and keeps its ``r``; uint8 frames read ``l`` from the table,
+     float frames take ``ln`` on the pixels outside the band only). The same stage makes the row passes of the
+     last map, per polarity ``q``: ``g (*)_x X_q(t-1)``, ``x g (*)_x X_q(t-1)`` (zero padding).
+   * the column passes ``K_n``, ``K_x``, ``K_y`` of the separable (2 R + 1)^2 correlations (5x5) of ``X_q(t-1)``
+     for the polarity ``q`` of the pixel's own event only (the other's term is 0; a lane vector without events
+     has no flow and skips them);
+     ``v = -|X(t)| (K_x, K_y) dt / (reg + dt^2 K_n)``, ``v_r = v_x w_x + v_y w_y``; results the left and right
+     sums of ``v_r w_pos``.
 
 The kernel radius is a compile-time option (``radius``); the taps ``g`` and ``x g`` (normalised 1-D Gaussian,
 ``2 R + 1`` each) are the coefficient ``taps``. NumPy float64 oracle:
@@ -41,8 +45,6 @@ COEFS = Coefs(emulator=9, levels=768, dt=1, reg=1, sigma_pos=1, taps=0)
 SCALARS = Scalars("levels first width height half")
 X, VX, VY, VR, RH, RM, RL, LO, HI, NP, XP, NN, XN, WP = PLANES
 K, V = COEFS, SCALARS
-#: Each polarity's row passes (``g``, ``x g``).
-ROWS = ((NP, XP), (NN, XN))
 
 
 @functools.lru_cache(maxsize=None)
@@ -74,40 +76,60 @@ def build(ti, lanes: int) -> SimpleNamespace:
         a.put(WP, wpos)
 
     @ti.func
-    def f64(high, mid, low):
-        """The float64 value of three float32 parts (exact: a float64 has 53 bits, the parts 3 x 24)."""
-        return (ti.cast(high, ti.f64) + ti.cast(mid, ti.f64)) + ti.cast(low, ti.f64)
+    def cast(v, dt: ti.template(), lane: ti.template()):
+        """``v`` (a value, or a lane vector if ``lane``: lane by lane, vector casts abort both compilers) as ``dt``."""
+        if ti.static(lane):
+            n = ti.static(lanes)  # (quadrants' comprehensions see locals only)
+            return ti.Vector([ti.cast(v[q], dt) for q in ti.static(range(n))], dt=dt)
+        else:
+            return ti.cast(v, dt)
 
     @ti.func
-    def f32_parts(v):
+    def f64(high, mid, low, lane: ti.template()):
+        """The float64 value of three float32 parts (exact: a float64 has 53 bits, the parts 3 x 24)."""
+        return (cast(high, ti.f64, lane) + cast(mid, ti.f64, lane)) + cast(low, ti.f64, lane)
+
+    @ti.func
+    def f32_parts(v, lane: ti.template()):
         """The three float32 parts of the float64 ``v``, high first."""
-        high = ti.cast(v, ti.f32)
-        rest = v - ti.cast(high, ti.f64)
-        mid = ti.cast(rest, ti.f32)
-        return high, mid, ti.cast(rest - ti.cast(mid, ti.f64), ti.f32)
+        high = cast(v, ti.f32, lane)
+        rest = v - cast(high, ti.f64, lane)
+        mid = cast(rest, ti.f32, lane)
+        return high, mid, cast(rest - cast(mid, ti.f64, lane), ti.f32, lane)
 
     @ti.func
     def coef64(coefs: ti.template(), k):
         """Coefficient ``k`` of three parts (float64); the first of the emulator's is ``E0``."""
-        return f64(coefs[k], coefs[k + 1], coefs[k + 2])
+        return f64(coefs[k], coefs[k + 1], coefs[k + 2], False)
 
     @ti.func
-    def exact(coefs: ti.template(), g, high, mid, low, first, levels, loud):
-        """One pixel of the emulator in float64: ``X`` and the three parts of the new ``r``. A pixel inside its band
-        gets 0 and the same ``r``, so a quiet pixel may run it too (``loud`` 0: a float frame skips its ``ln``)."""
-        c_on, c_off, eps = coef64(coefs, E0), coef64(coefs, E0 + 3), coef64(coefs, E0 + 6)
-        ref, level = f64(high, mid, low), ti.f64(0.0)
-        if levels == 255.0:  # uint8 frames: the emulator's levels (exact)
+    def level_of(coefs: ti.template(), g, ref, levels, loud):
+        """The log level ``l`` of one pixel's grey ``g`` (float64): on uint8 frames the emulator's (exact, from the
+        table), on a float frame ``ln`` where ``loud`` (else ``r``: no crossing)."""
+        level = ref
+        if levels == 255.0:
             level = coef64(coefs, K.levels.slot + 3 * ti.cast(g, ti.i32))
         elif loud > 0.0:
-            level = ti.log(ti.cast(g, ti.f64) / ti.cast(levels, ti.f64) + eps)
-        else:  # quiet: no crossing
-            level = ref
+            level = ti.log(ti.cast(g, ti.f64) / ti.cast(levels, ti.f64) + coef64(coefs, E0 + 6))
+        return level
+
+    @ti.func
+    def exact(coefs: ti.template(), g, high, mid, low, first, levels, loud, lane: ti.template()):
+        """The emulator in float64 on one pixel or a lane vector (float64 vectors): ``X`` and the three parts of the
+        new ``r``. A pixel inside its band gets 0 and the same ``r``, so a quiet pixel may run it too (``loud`` 0: a
+        float frame skips its ``ln``); the first frame sets ``r = l`` and no event."""
+        c_on, c_off, ref = coef64(coefs, E0), coef64(coefs, E0 + 3), f64(high, mid, low, lane)
+        level = ref
+        if ti.static(lane):  # the levels lane by lane (the table's loads, ln)
+            pixel, m = ti.static(level_of, lanes)  # (quadrants' comprehensions see locals only)
+            level = ti.Vector([pixel(coefs, g[q], ref[q], levels, loud[q]) for q in ti.static(range(m))], dt=ti.f64)
+        else:
+            level = level_of(coefs, g, ref, levels, loud)
+        ref = ti.select(first != 0.0, level, ref)
         d = level - ref  # ref - level is -d exactly: the emulator's n_on, n_off from one division
-        n = ti.cast(ti.cast(ti.abs(d) / ti.select(d > 0.0, c_on, c_off), ti.i64), ti.f64)  # floor (>= 0)
-        s = ti.select((first != 0.0) | (n < 1.0), 0.0, ti.select(d > 0.0, 1.0, -1.0))
-        high, mid, low = f32_parts(ti.select(first != 0.0, level, ref + n * ti.select(d > 0.0, c_on, 0.0 - c_off)))
-        return ti.cast(s, ti.f32), high, mid, low
+        n = cast(cast(ti.max(d, 0.0 - d) / ti.select(d > 0.0, c_on, c_off), ti.i64, lane), ti.f64, lane)  # floor
+        high, mid, low = f32_parts(ref + n * ti.select(d > 0.0, c_on, 0.0 - c_off), lane)
+        return cast(ti.select(n < 1.0, 0.0, ti.select(d > 0.0, 1.0, -1.0)), ti.f32, lane), high, mid, low
 
     @ti.func
     def exp32(x):
@@ -132,20 +154,12 @@ def build(ti, lanes: int) -> SimpleNamespace:
     def emulate(a: ti.template()):
         """The emulator's signed map of this frame; updates ``r`` (``_RH + _RM + _RL``) and its band where a cell
         has a pixel outside its band (the others are not read or written)."""
-        g, g_lo, g_hi, first = a.grey(), a.at(LO), a.at(HI), a.value(V.first)
-        levels = a.value(V.levels)
+        g, g_lo, g_hi, first, levels = a.grey(), a.at(LO), a.at(HI), a.value(V.first), a.value(V.levels)
         loud = ti.select((g > g_lo) & (g < g_hi), 0.0, 1.0) + first  # first frame: every pixel
         s = a.zeros()
         if a.any(loud > 0.0):
             high, mid, low = a.at(RH), a.at(RM), a.at(RL)
-            if ti.static(a.lane):  # float64 element by element (the lane vector types have none)
-                # every lane, no branch, each result built as one vector (quadrants' comprehensions see locals only)
-                pixel, n = ti.static(exact, lanes)
-                lane = [pixel(a.coefs, g[q], high[q], mid[q], low[q], first, levels, loud[q])
-                        for q in ti.static(range(n))]
-                s, high, mid, low = [ti.Vector([v[k] for v in lane], dt=ti.f32) for k in ti.static(range(4))]
-            else:
-                s, high, mid, low = exact(a.coefs, g, high, mid, low, first, levels, loud)
+            s, high, mid, low = exact(a.coefs, g, high, mid, low, first, levels, loud, a.lane)
             g_lo, g_hi = band(a.coefs, high, levels)
             for plane, v in ti.static(((RH, high), (RM, mid), (RL, low), (LO, g_lo), (HI, g_hi))):
                 a.put(plane, v)
@@ -153,7 +167,8 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
     @ti.func
     def signed_map(a: ti.template()):
-        """``X.now``: the sign of ``p_on - p_off`` of an event bin, or the emulator's map of a frame."""
+        """``X.now``: the sign of ``p_on - p_off`` of an event bin, or the emulator's map of a frame; and the row
+        passes ``g (*)_x X_q(t-1)``, ``x g (*)_x X_q(t-1)`` of each polarity (ON: ``X > 0``, OFF: ``X < 0``)."""
         s = a.zeros()
         if ti.static(a.events):
             p_on, p_off = a.event(0), a.event(1)
@@ -161,10 +176,6 @@ def build(ti, lanes: int) -> SimpleNamespace:
         else:
             s = emulate(a)
         a.put(X.now, s)
-
-    @ti.func
-    def row_passes(a: ti.template()):
-        """``g (*)_x X_q(t-1)`` and ``x g (*)_x X_q(t-1)`` of each polarity (ON: ``X > 0``, OFF: ``X < 0``)."""
         R = ti.static(a.option("radius"))
         for q in ti.static(range(2)):
             n, x = a.zeros(), a.zeros()
@@ -172,26 +183,27 @@ def build(ti, lanes: int) -> SimpleNamespace:
                 v = ti.max(a.at(X.before, 0, d) * (1.0 - 2.0 * q), 0.0)
                 n += a.coef(K.taps, d + R) * v
                 x += a.coef(K.taps, 2 * R + 1 + d + R) * v
-            a.put(ROWS[q][0], n)
-            a.put(ROWS[q][1], x)
+            a.put((NP, NN)[q], n)  # each polarity's row passes (g, x g)
+            a.put((XP, XN)[q], x)
 
     @ti.func
     def flow(a: ti.template()):
         """``v = v^on + v^off``, ``v^q = -X_q(t) (K_x, K_y) dt / (reg + dt^2 K_n)`` from the row passes of
-        ``X_q(t-1)``, and ``v_r``; returns the left and right sums of ``v_r w_pos`` (summed)."""
+        ``X_q(t-1)``, and ``v_r``; returns the left and right sums of ``v_r w_pos`` (summed). A pixel has one
+        polarity (``X(t)`` is 1, -1 or 0): the column passes take the row passes of its own (the other's term
+        is 0); a cell without events has none."""
         R = ti.static(a.option("radius"))
         x, dt = a.at(X.now), a.coef(K.dt)
         vx, vy = a.zeros(), a.zeros()
-        for q in ti.static(range(2)):
+        if a.any(x != 0.0):
             kn, kx, ky = a.zeros(), a.zeros(), a.zeros()
             for d in ti.static(range(-R, R + 1)):
-                g, n = a.coef(K.taps, d + R), a.at(ROWS[q][0], d, 0)
+                g, n = a.coef(K.taps, d + R), ti.select(x > 0.0, a.at(NP, d, 0), a.at(NN, d, 0))
                 kn += g * n
                 ky += a.coef(K.taps, 2 * R + 1 + d + R) * n
-                kx += g * a.at(ROWS[q][1], d, 0)
-            scale = ti.max(x * (1.0 - 2.0 * q), 0.0) * (0.0 - dt) / (a.coef(K.reg) + dt * dt * kn)
-            vx += kx * scale
-            vy += ky * scale
+                kx += g * ti.select(x > 0.0, a.at(XP, d, 0), a.at(XN, d, 0))
+            scale = x * x * (0.0 - dt) / (a.coef(K.reg) + dt * dt * kn)  # X(t)^2 = |X(t)|
+            vx, vy = kx * scale, ky * scale
         wx, wy, left = radial(a)
         vr = vx * wx + vy * wy
         for plane, v in ti.static(((VX, vx), (VY, vy), (VR, vr))):
@@ -199,6 +211,5 @@ def build(ti, lanes: int) -> SimpleNamespace:
         return vr * a.at(WP) * left, vr * a.at(WP) * (1.0 - left)
 
     setup = Launch("setup", Stage(weights))
-    load = Launch("load", Stage(signed_map, ghosts=(X.now,), halo="radius"))
-    flow_launch = Launch("flow", Stage(row_passes), Stage(flow, sums="left right"))
-    return engine.model(PLANES, COEFS, SCALARS, engine.build(ti, lanes), setup, load, flow_launch)
+    step = Launch("step", Stage(signed_map, ghosts=(X.now,), halo="radius"), Stage(flow, sums="left right"))
+    return engine.model(PLANES, COEFS, SCALARS, engine.build(ti, lanes), setup, step)

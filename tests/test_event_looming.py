@@ -9,6 +9,7 @@ import cv2
 import model_checks as checks
 import numpy as np
 import pytest
+from test_lplc2_real import REPO, code_lines
 
 from cdnf_ti.event_looming_reference import EventLoomingReference, frame_bins
 from cdnf_ti.events.binning import bin_events, contrast_input
@@ -163,3 +164,8 @@ def test_the_alert_is_output_above_zero():
 def test_bad_parameters_are_value_errors(bad):
     with pytest.raises(ValueError):
         EventLoomingParams(**bad)
+
+
+def test_the_model_and_its_kernels_are_at_most_250_code_lines():
+    assert code_lines(REPO / "kernels" / "event_looming.py") + code_lines(
+        REPO / "cdnf_ti" / "models" / "event_looming.py") <= 250

@@ -198,8 +198,7 @@ class EventLooming(Model):
             be.launch("setup", width=float(be.shape[1]), height=float(be.shape[0]), half=float(be.shape[1] // 2))
         be.flip()  # this bin's map goes to X.now, the last one's is X.before
         levels = 255.0 if grey is not None and grey.dtype == np.uint8 else 1.0
-        be.launch("load", levels=levels, first=float(grey is not None and t == 0))
-        left, right = be.launch("flow")
+        left, right = be.launch("step", levels=levels, first=float(grey is not None and t == 0))
         return self._output(t, left, right)
 
     def _output(self, t: int, left: float, right: float) -> StepResult:
