@@ -168,6 +168,11 @@ class LPLC2(Model):
         thr = float(self.params.v_threshold)
         return AlertRule(f"V > {thr:g} mV in a substep (a GF spike)", "V before reset", "V_peak", thr, strict=True)
 
+    @classmethod
+    def frame_colour(cls, params: LPLC2Params | None = None) -> str:
+        """``"bgr"`` for ``variant="real"`` (folder 7 reads the green channel), else ``"grey"``."""
+        return "bgr" if params is not None and params.variant == "real" else "grey"
+
     def _numpy_backend(self, shape: tuple[int, int]) -> NumpyLPLC2Backend:
         if self.params.variant != "arena":  # the float64 real variant: LPLC2Reference(variant="real")
             raise UserError("lplc2: --backend numpy runs variant=arena only (not variant=real)")
