@@ -166,11 +166,24 @@ EVENTS_KEY = "events"
 TRACE_KEY = "trace"
 
 
+def _rule_column(model: Any, res: Any) -> Any:
+    """The model's alert rule when it compares a diagnostic of ``res`` rather than the output (EMD-LPLC2: ``V``
+    before a spike's reset; oLGMD: the spike sum), else None."""
+    rule = model.alert_rule() if hasattr(model, "alert_rule") else None
+    if rule is None or rule.column == model.output_name or rule.column not in res.diagnostics:
+        return None
+    return rule
+
+
 def _trace_values(model: Any, res: Any, n_ts: int | None) -> tuple[float, float | None]:
-    """What the trace panel draws for one step: the spike count and ``n_ts`` (the LGMD family), else the
-    output and its threshold (SDNF: the dynamic one; None: none)."""
+    """What the trace panel draws for one step: the spike count and ``n_ts`` (the LGMD family); the diagnostic
+    the alert rule compares and its level (:func:`_rule_column`); else the output and its threshold (SDNF: the
+    dynamic one; None: none)."""
     if "count" in res.diagnostics and n_ts is not None:
         return float(res.diagnostics["count"]), float(n_ts)
+    rule = _rule_column(model, res)
+    if rule is not None:
+        return float(res.diagnostics[rule.column]), float(rule.level)
     dyn = res.diagnostics.get("dyn_threshold")
     return float(res.output), (float(dyn) if dyn is not None else model.threshold)
 
@@ -419,7 +432,9 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
             while len(panels) < 4:
                 panels.append(np.zeros_like(panels[0]))
             top = np.concatenate([np.concatenate(panels[:2], 1), np.concatenate(panels[2:4], 1)], 0)
-            name = f"{model.name} spike count (n_ts {n_ts})" if uses_count else f"{model.name} {model.output_name}"
+            rule = None if uses_count else _rule_column(model, res)
+            name = (f"{model.name} spike count (n_ts {n_ts})" if uses_count
+                    else f"{model.name} {rule.quantity if rule is not None else model.output_name}")
             trace = _trace_panel(top.shape[1], t, n_total, out, thr, spikes, name, fps, window,
                                  "bin" if isinstance(frame, tuple) else "frame", (ranges or {}).get(TRACE_KEY))
             movie = np.concatenate([top, trace], 0)
