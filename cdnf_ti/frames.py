@@ -72,6 +72,35 @@ def to_grey(frame: np.ndarray) -> np.ndarray:
     raise ValueError(f"unsupported frame dtype {a.dtype}")
 
 
+@dataclass(frozen=True)
+class ColourFrame:
+    """One decoded frame in the two forms the models take (:meth:`~cdnf_ti.models.base.Model.frame_colour`).
+
+    Attributes
+    ----------
+    grey : ndarray, shape (H, W)
+        The frame made grey once, by :func:`to_grey` (uint8, or float32 in [0, 1]).
+    bgr : ndarray, shape (H, W, 3) or (H, W)
+        The frame as decoded: BGR uint8 (or float) where the input has colour, else the grey frame.
+    """
+
+    grey: np.ndarray
+    bgr: np.ndarray
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """The frame size (H, W) in pixels."""
+        return self.grey.shape
+
+    @classmethod
+    def of(cls, frame: np.ndarray) -> "ColourFrame":
+        """Both forms of a decoded ``frame``: its grey by :func:`to_grey`, its colour as it is (BGRA: without the
+        alpha channel; (H, W) or (H, W, 1): the grey frame)."""
+        grey = to_grey(frame)
+        bgr = np.asarray(frame)
+        return cls(grey, bgr[:, :, :3] if bgr.ndim == 3 and bgr.shape[2] in (3, 4) else grey)
+
+
 @dataclass
 class FrameSource:
     """A re-iterable stream of frames from one input.
@@ -365,10 +394,10 @@ def open_source(path: str | os.PathLike, fps: float | None = None, color_order: 
     return open_video(p, fps)
 
 
-def _grey_frames(source: FrameSource) -> Iterator[np.ndarray]:
+def _converted_frames(source: FrameSource, convert) -> Iterator:
     for t, f in enumerate(source):
         try:
-            yield to_grey(f)
+            yield convert(f)
         except ValueError as e:
             raise InputError(source.path, f"frame {t}: {e}") from None
 
@@ -383,7 +412,23 @@ def iter_grey(source: FrameSource, prefetch: int = 4) -> Iterator[np.ndarray]:
         For file sources, decode and convert up to this many frames ahead on a
         background thread, off the model's critical path (0 = decode inline).
     """
-    frames = _grey_frames(source)
+    return iter_frames(source, colour=False, prefetch=prefetch)
+
+
+def iter_frames(source: FrameSource, colour: bool, prefetch: int = 4) -> Iterator:
+    """Frames of ``source`` for models: grey (:func:`iter_grey`), or with ``colour`` each frame in both forms.
+
+    Parameters
+    ----------
+    source : FrameSource
+    colour : bool
+        False: grey (H, W) arrays. True: :class:`ColourFrame` items (decoded once, made grey once), for a
+        pass in which some model takes colour frames (:func:`~cdnf_ti.models.base.takes_colour`).
+    prefetch : int
+        For file sources, decode and convert up to this many frames ahead on a
+        background thread, off the model's critical path (0 = decode inline).
+    """
+    frames = _converted_frames(source, ColourFrame.of if colour else to_grey)
     if prefetch > 0 and source.background_decode:
         return prefetched(frames, prefetch)
     return frames

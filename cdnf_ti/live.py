@@ -60,9 +60,10 @@ from .cli_common import (
 )
 from .errors import InputError, UserError, output_error
 from .experiments.parallel import acknowledge_signal
+from .frames import ColourFrame
 from .limits import check_frame_size
 from .live_sources import Capture, Frame, LatestFrames, ProcessCapture, SourceSpec, StreamEnded, parse_source
-from .models import create_model
+from .models import create_model, get_model_class
 from .video import codec_for, to_uint8, write_video
 
 #: Seconds between two status lines when stderr is a log (not a terminal), by default.
@@ -288,14 +289,14 @@ def annotate(image: np.ndarray, results: Sequence[dict], frame: Frame) -> np.nda
 
     Parameters
     ----------
-    image : ndarray
-        (H, W) grey or (H, W, 3) BGR; uint8 or float in [0, 1].
+    image : ndarray or ColourFrame
+        (H, W) grey or (H, W, 3) BGR; uint8 or float in [0, 1] (a ColourFrame: its colour form).
     results : list of dict
         One per model: ``model``, ``output_name``, ``value``, ``alert``, ``latency_ms``.
     frame : Frame
         For the frame index and time written at the bottom.
     """
-    a = to_uint8(image)
+    a = to_uint8(image.bgr if isinstance(image, ColourFrame) else image)
     out = cv2.cvtColor(a, cv2.COLOR_GRAY2BGR) if a.ndim == 2 else a.copy()
     h, w = out.shape[:2]
     scale = max(0.35, min(h, w) / 700.0)
@@ -408,14 +409,21 @@ class Recorder:
 
 
 # -- the loop ------------------------------------------------------------------------------------------
-def warm_up(models: Sequence[Any], image: np.ndarray) -> float:
+def _inverted_patch(image: np.ndarray) -> np.ndarray:
+    """A copy of ``image`` (uint8, or float in [0, 1]) whose patch from a quarter to half of each side is inverted."""
+    b = np.array(image)
+    h, w = b.shape[:2]
+    region = b[h // 4: h // 2 + 1, w // 4: w // 2 + 1]
+    region[...] = 255 - region if b.dtype == np.uint8 else 1.0 - region
+    return b
+
+
+def warm_up(models: Sequence[Any], image: np.ndarray | ColourFrame) -> float:
     """Compile every model for frames like ``image`` (three steps, then reset); returns the seconds taken."""
     t0 = time.perf_counter()
-    a = np.asarray(image)
-    b = a.copy()
-    h, w = a.shape[:2]
-    region = b[h // 4: h // 2 + 1, w // 4: w // 2 + 1]
-    region[...] = 255 - region if a.dtype == np.uint8 else 1.0 - region
+    a = image if isinstance(image, ColourFrame) else np.asarray(image)
+    b = (ColourFrame(_inverted_patch(a.grey), _inverted_patch(a.bgr)) if isinstance(a, ColourFrame)
+         else _inverted_patch(a))
     for m in models:
         m.reset()
         for f in (a, b, a):
@@ -796,8 +804,9 @@ def main(argv: Sequence[str]) -> int:
         return [create_model(n, params[n], backend=args.backend, arch=args.arch, fps=fps) for n in names]
 
     frames = LatestFrames(args.queue)
+    colour = any(get_model_class(n).frame_colour(params[n]) == "bgr" for n in names)  # frames in both forms
     capture = ProcessCapture(spec, frames, fps=args.fps, color_order=args.color_order, timeout_s=args.timeout,
-                             retry_for_s=args.retry_for)
+                             retry_for_s=args.retry_for, colour=colour)
     recorder = Recorder(args.record, fps=30.0) if args.record is not None else None  # checked before any work
     loop = LiveLoop(capture, make_models, sinks, status=status, recorder=recorder,
                     duration_s=args.duration or math.inf, diagnostics=args.diagnostics)

@@ -30,14 +30,14 @@ import os
 import signal
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Callable, Iterator
 
 import cv2
 import numpy as np
 
 from .errors import InputError, UserError
-from .frames import DEFAULT_FPS, to_grey
+from .frames import DEFAULT_FPS, ColourFrame, to_grey
 from .inputs import resolve_input
 
 #: Kinds of source (:attr:`SourceSpec.kind`).
@@ -101,9 +101,10 @@ class Frame:
     index : int
         Index of the frame at the source: frames read since the start, 0-based, counted
         across reconnects.
-    image : ndarray
+    image : ndarray or ColourFrame
         (H, W, 3) BGR uint8 from cameras, URLs and video files; whatever the file input
-        yields otherwise ((H, W) float32 grey in [0, 1] for generated stimuli).
+        yields otherwise ((H, W) float32 grey in [0, 1] for generated stimuli). From a
+        :class:`ProcessCapture`: grey, or a :class:`~cdnf_ti.frames.ColourFrame` (``colour``).
     captured : float
         ``time.perf_counter()`` when the frame was received (s): a camera or URL frame
         once grabbed, before its conversion to BGR; a file's frame once decoded.
@@ -448,10 +449,11 @@ class Capture:
 
 # -- capture in a child process ---------------------------------------------------------------------------
 def _child_main(conn, spec: SourceSpec, queue_size: int, fps: float | None, color_order: str, timeout_s: float,
-                retry_for_s: float) -> None:
+                retry_for_s: float, colour: bool = False) -> None:
     """The capture process: a :class:`Capture` whose frames are sent to the parent over ``conn``.
 
-    Frames are sent grey (:func:`cdnf_ti.frames.to_grey`, what the models take).
+    Frames are sent grey (:func:`cdnf_ti.frames.to_grey`, what the models take), or with ``colour`` (a model
+    takes colour frames) as :class:`~cdnf_ti.frames.ColourFrame` (made grey once, here).
     Messages to the parent: ``("opened", fps, first_frame)`` or ``("error", message)``; then
     ``("frame", frame, dropped_here, reconnects)``, ``("event", kind, info)``, and at last
     ``("end", reason, reconnects)`` or ``("error", message)``. From the parent: ``"start"``,
@@ -464,13 +466,14 @@ def _child_main(conn, spec: SourceSpec, queue_size: int, fps: float | None, colo
         with send_lock:
             conn.send(message)
 
+    convert = ColourFrame.of if colour else to_grey
     frames = LatestFrames(queue_size)
     capture = Capture(spec, frames, fps=fps, color_order=color_order, timeout_s=timeout_s, retry_for_s=retry_for_s,
                       report=lambda kind, info: send(("event", kind, info)))
     try:
         try:
-            first = capture.open()
-            first.image = to_grey(first.image)
+            opened = capture.open()  # queued again by the capture at start: converted there, as every frame
+            first = replace(opened, image=convert(opened.image))
         except Exception as e:  # noqa: BLE001 - one line for the parent
             send(("error", str(e) if isinstance(e, UserError) else f"{spec.text}: {type(e).__name__}: {e}"))
             return
@@ -492,7 +495,7 @@ def _child_main(conn, spec: SourceSpec, queue_size: int, fps: float | None, colo
             try:
                 frame = frames.get(timeout=0.5)
                 if frame is not None:
-                    frame.image = to_grey(frame.image)  # what the models take; a third of the bytes to send
+                    frame.image = convert(frame.image)  # what the models take (grey: a third of the bytes to send)
             except StreamEnded as e:
                 send(("end", str(e), capture.reconnects))
                 return
@@ -514,18 +517,19 @@ class ProcessCapture:
     parent, compiled kernels hold the interpreter lock while they run, so a capture
     thread there could only note a frame's arrival once the running kernel returned, and
     the latencies would come out too short. Frames are converted to grey in the child
-    (:func:`cdnf_ti.frames.to_grey`) and reach the parent through a pipe (counted in the
-    latency); they go to ``frames``, where the frames the child had to drop while the pipe
-    was busy are counted too.
+    (:func:`cdnf_ti.frames.to_grey`), or with ``colour`` kept in both forms
+    (:class:`~cdnf_ti.frames.ColourFrame`, for a model that takes colour frames), and reach the parent
+    through a pipe (counted in the latency); they go to ``frames``, where the frames the child had to
+    drop while the pipe was busy are counted too.
 
-    Parameters are those of :class:`Capture`.
+    Parameters are those of :class:`Capture`, and ``colour``.
     """
 
     def __init__(self, spec: SourceSpec, frames: LatestFrames, fps: float | None = None, color_order: str = "bgr",
                  timeout_s: float = 5.0, retry_for_s: float = 30.0,
-                 report: Callable[[str, dict], None] | None = None):
+                 report: Callable[[str, dict], None] | None = None, colour: bool = False):
         self.spec, self.frames = spec, frames
-        self._args = (spec, frames.maxsize, fps, color_order, float(timeout_s), float(retry_for_s))
+        self._args = (spec, frames.maxsize, fps, color_order, float(timeout_s), float(retry_for_s), bool(colour))
         self.timeout_s = float(timeout_s)
         self.report = report or (lambda kind, info: None)
         self.fps = float(fps) if fps else DEFAULT_FPS

@@ -58,14 +58,14 @@ from .events.readers import is_event_file
 from .events.source import EventSource, open_event_source
 from .experiments.labels import find_clip
 from .experiments.layout import trace_path
-from .frames import iter_grey, to_grey
+from .frames import ColourFrame, iter_frames, to_grey
 from .inputs import resolve_input
 from .limits import check_frame_size
 from .models import create_model, get_model_class
-from .models.base import NotConvergedWarning, bin_ms_for
+from .models.base import NotConvergedWarning, bin_ms_for, takes_colour
 from .paths import inside
 from .stimuli.rain import RainParams, RainyFrames
-from .video import codec_for, write_video
+from .video import codec_for, to_uint8, write_video
 
 PANEL_FONT = cv2.FONT_HERSHEY_SIMPLEX
 TRACE_H = 170
@@ -166,20 +166,34 @@ EVENTS_KEY = "events"
 TRACE_KEY = "trace"
 
 
+def _rule_column(model: Any, res: Any) -> Any:
+    """The model's alert rule when it compares a diagnostic of ``res`` rather than the output (EMD-LPLC2: ``V``
+    before a spike's reset; oLGMD: the spike sum), else None."""
+    rule = model.alert_rule() if hasattr(model, "alert_rule") else None
+    if rule is None or rule.column == model.output_name or rule.column not in res.diagnostics:
+        return None
+    return rule
+
+
 def _trace_values(model: Any, res: Any, n_ts: int | None) -> tuple[float, float | None]:
-    """What the trace panel draws for one step: the spike count and ``n_ts`` (the LGMD family), else the
-    output and its threshold (SDNF: the dynamic one; None: none)."""
+    """What the trace panel draws for one step: the spike count and ``n_ts`` (the LGMD family); the diagnostic
+    the alert rule compares and its level (:func:`_rule_column`); else the output and its threshold (SDNF: the
+    dynamic one; None: none)."""
     if "count" in res.diagnostics and n_ts is not None:
         return float(res.diagnostics["count"]), float(n_ts)
+    rule = _rule_column(model, res)
+    if rule is not None:
+        return float(res.diagnostics[rule.column]), float(rule.level)
     dyn = res.diagnostics.get("dyn_threshold")
     return float(res.output), (float(dyn) if dyn is not None else model.threshold)
 
 
 def _step(model: Any, item: Any) -> Any:
-    """Step ``model`` on one input: a frame, or an event bin ``(p_on, p_off)`` (its ON/OFF input stage)."""
+    """Step ``model`` on one input: a frame (an array, or a :class:`~cdnf_ti.frames.ColourFrame`: the form the model
+    takes), or an event bin ``(p_on, p_off)`` (its ON/OFF input stage)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NotConvergedWarning)  # recorded per frame in "converged"
-        return model.step_on_off(*item) if isinstance(item, tuple) else model.step(to_grey(item))
+        return model.step_on_off(*item) if isinstance(item, tuple) else model.step(item)
 
 
 def field_ranges(model: Any, frames: Iterator[np.ndarray], progress: bool | str = False,
@@ -271,13 +285,18 @@ def event_scale(p_on: np.ndarray, p_off: np.ndarray) -> float:
 
 
 def input_panel(item: Any, scale: float = 1.0) -> np.ndarray:
-    """The input panel of one step, with its colour bar: the grey frame, or an event bin
-    (:func:`event_panel`, full colour at net contrast ``scale``)."""
+    """The input panel of one step, with its colour bar: the grey frame; the colour frame of a
+    :class:`~cdnf_ti.frames.ColourFrame` (a model that takes colour), beside the grey scale of its luma;
+    or an event bin (:func:`event_panel`, full colour at net contrast ``scale``)."""
     if isinstance(item, tuple):
         img = event_panel(*item, scale=scale)
         _label(img, "events")
         return np.concatenate([img, event_bar(img.shape[0], scale)], 1)
-    grey = to_grey(item)
+    if isinstance(item, ColourFrame) and item.bgr.ndim == 3:
+        img = to_uint8(item.bgr).copy()  # drawn on: not the frame itself
+        _label(img, "input (colour)")
+        return np.concatenate([img, _GREY_SCALE.bar(img.shape[0])], 1)
+    grey = to_grey(getattr(item, "grey", item))
     g8 = grey if grey.dtype == np.uint8 else np.clip(np.rint(grey * 255), 0, 255).astype(np.uint8)
     img = cv2.cvtColor(g8, cv2.COLOR_GRAY2BGR)
     _label(img, "input")
@@ -413,7 +432,9 @@ def render_frames(model: Any, frames: Iterator[np.ndarray], fps: float, n_total:
             while len(panels) < 4:
                 panels.append(np.zeros_like(panels[0]))
             top = np.concatenate([np.concatenate(panels[:2], 1), np.concatenate(panels[2:4], 1)], 0)
-            name = f"{model.name} spike count (n_ts {n_ts})" if uses_count else f"{model.name} {model.output_name}"
+            rule = None if uses_count else _rule_column(model, res)
+            name = (f"{model.name} spike count (n_ts {n_ts})" if uses_count
+                    else f"{model.name} {rule.quantity if rule is not None else model.output_name}")
             trace = _trace_panel(top.shape[1], t, n_total, out, thr, spikes, name, fps, window,
                                  "bin" if isinstance(frame, tuple) else "frame", (ranges or {}).get(TRACE_KEY))
             movie = np.concatenate([top, trace], 0)
@@ -468,8 +489,9 @@ def render_video(source: str | Path, model_name: str, out: str | Path, params: A
     def frames():
         if is_events:
             return src.contrast(threshold)
-        grey = iter_grey(src)
-        return iter(RainyFrames(grey, rain, seed=rain_seed)) if rain is not None else grey
+        if rain is not None:  # rainy frames are grey
+            return iter(RainyFrames(iter_frames(src, False), rain, seed=rain_seed))
+        return iter_frames(src, takes_colour([model]))
 
     seen = [0]
 

@@ -74,11 +74,11 @@ from .experiments.parallel import (
     stop_all_pools,
     watch_interrupts,
 )
-from .frames import IMAGE_EXTENSIONS, iter_grey
+from .frames import IMAGE_EXTENSIONS, iter_frames
 from .inputs import resolve_input
 from .limits import check_drops, check_frame_size
 from .models import create_model, get_model_class
-from .models.base import NotConvergedWarning, bin_ms_for, run_models
+from .models.base import NotConvergedWarning, bin_ms_for, run_models, takes_colour
 from .paths import inside
 from .stimuli.rain import RainParams, RainyFrames
 from .taichi_runtime import lanes_override
@@ -227,7 +227,9 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", NotConvergedWarning)  # reported per line below
-                frames = source.contrast(args.event_threshold) if events else iter_grey(source)
+                # colour frames where a model takes them (rain makes grey frames; event bins have no colour)
+                colour = not events and rain_params is None and takes_colour(readers)
+                frames = source.contrast(args.event_threshold) if events else iter_frames(source, colour)
                 if rain_params is not None:
                     rain = RainyFrames(frames, rain_params, seed=rain_seed)
                     frames = iter(rain)
@@ -259,7 +261,8 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
         ran += 1
         trace_name = trace_file_name(clip, name, condition)
         trace.to_csv(inside(out, trace_name))
-        settings = run_settings(args, path, source, rain_params, rain_seed)
+        settings = run_settings(args, path, source, rain_params, rain_seed,
+                                colour=not events and rain_params is None and takes_colour([model]))
         alert = alert_summary(trace, model.alert_rule(), source.fps)
         fa = alert.first_alert
         fa_txt = f"{fa} ({alert.first_alert_s:.2f} s)" if fa is not None else "none"
@@ -328,7 +331,7 @@ def params_text(model) -> str:
     return ";".join(f"{k}={v}" for k, v in params.to_dict().items() if default.get(k, object()) != v)
 
 
-def run_settings(args, path, src, rain_params, rain_seed: int) -> dict[str, str]:
+def run_settings(args, path, src, rain_params, rain_seed: int, colour: bool = False) -> dict[str, str]:
     """The options besides the model's parameters that change a run's result, as ``{name: value}``.
 
     With the clip, model, condition and parameters they are the run's identity (docs/EXPERIMENTS.md,
@@ -337,7 +340,9 @@ def run_settings(args, path, src, rain_params, rain_seed: int) -> dict[str, str]
     ``bin_ms`` (the width of the bins ``src`` gives: the model's, :func:`input_passes`),
     ``event_threshold`` and ``sensor_size`` (WxH, given or found); under rain the
     droplets per frame (``rain_drops``, the default resolved for the frame size) and
-    ``rain_seed``. Values are the settings in effect, not the options as typed.
+    ``rain_seed``; ``frames=bgr`` where the model took the decoded colour frames (``colour``:
+    :meth:`~cdnf_ti.models.base.Model.frame_colour`; absent: the grey frames every model took before).
+    Values are the settings in effect, not the options as typed.
     """
     settings = {"backend": str(args.backend)}
     if isinstance(src, EventSource):
@@ -348,6 +353,8 @@ def run_settings(args, path, src, rain_params, rain_seed: int) -> dict[str, str]
         settings["fps"] = f"{src.fps:g}"
         if str(path).lower().endswith(".npy"):
             settings["color_order"] = str(args.color_order)
+    if colour:
+        settings["frames"] = "bgr"
     if rain_params is not None:
         settings.update(rain_drops=str(rain_params.drops_for(src.shape)), rain_seed=str(int(rain_seed)))
     return settings

@@ -72,7 +72,7 @@ def test_real_variant_pixel_layout_matches_reference_on_basic_stimulus(stim):
 
 @pytest.fixture(scope="module", params=CLIPS)
 def clip(request, shared_real):
-    """A development dashcam clip's grey frames (what ``run`` and ``dataset`` hand a model) and its fps."""
+    """A development dashcam clip's grey frames (what ``run`` hands a grey model) and its fps."""
     if shared_real is None or not (shared_real / request.param).exists():
         pytest.skip("the development dashcam clips are not present (the basic stimuli cover the variant)")
     from cdnf_ti.frames import iter_grey, open_source

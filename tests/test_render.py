@@ -233,3 +233,15 @@ def test_render_prints_what_it_wrote_on_stdout(tmp_path, capsys):
                  "--no-progress"]) == 0
     out, err = capsys.readouterr()
     assert f"{tmp_path / 'm.mp4'}: " in out and str(tmp_path / "m.mp4") not in err
+
+
+def test_the_trace_panel_draws_the_value_the_alert_rule_compares_and_its_level():
+    """EMD-LPLC2 alerts on V before a spike's reset (``V_peak``) above ``v_threshold``: the panel draws that
+    and the level, not the frame-end V, which a spike resets below the level."""
+    from cdnf_ti.models import LPLC2
+    from cdnf_ti.models.base import StepResult
+    from cdnf_ti.render import _trace_values
+
+    model = LPLC2(fps=30.0)
+    res = StepResult(5, -70.0, True, True, {"V_peak": -48.5})
+    assert _trace_values(model, res, None) == (-48.5, model.params.v_threshold)

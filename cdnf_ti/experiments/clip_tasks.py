@@ -32,10 +32,10 @@ from ..errors import InputError, UserError
 from ..events.binning import DEFAULT_BIN_MS, DEFAULT_EVENT_THRESHOLD, DEFAULT_MAX_GAP_S, DEFAULT_MAX_SPAN_S
 from ..events.readers import is_event_file, open_events
 from ..events.source import EventSource, open_event_source
-from ..frames import iter_grey, open_source
+from ..frames import ColourFrame, iter_frames, open_source
 from ..limits import check_frame_size
 from ..models import create_model, get_model_class
-from ..models.base import NotConvergedWarning, bin_ms_for, run_models
+from ..models.base import NotConvergedWarning, bin_ms_for, run_models, takes_colour
 from ..paths import inside
 from ..stimuli.rain import RainParams, RainyFrames
 from .labels import ClipLabel
@@ -112,10 +112,13 @@ class ClipTask:
     def fingerprint(self, model: str) -> dict:
         """The fingerprint of ``model``'s result (:func:`.layout.fingerprint`; a sweep adds
         ``params`` and ``downscale``; an event recording adds ``bin_ms``, ``event_threshold`` and
-        ``sensor_size``, and leaves out ``--fps`` and ``--color-order``, which do not apply to it)."""
+        ``sensor_size``, and leaves out ``--fps`` and ``--color-order``, which do not apply to it; a model that
+        takes the colour frames, :meth:`colour_frames`, adds ``frames: "bgr"``)."""
         events = self.events
         options = (run_options(model, self.params, None, "bgr") if events
                    else run_options(model, self.params, self.fps, self.color_order))
+        if self.colour_frames(model):
+            options["frames"] = "bgr"
         fp = fingerprint(self.path, self.condition, model, self.seed, self.backend, self.rain_params, self.arch,
                          options)
         if events:
@@ -124,6 +127,19 @@ class ClipTask:
         if self.key:
             fp.update(params={k: v for k, v in self.setting}, downscale=self.downscale)
         return fp
+
+    def model_params(self, model: str) -> Any:
+        """The parameters ``model`` runs with: a sweep's setting, else ``--param``'s (None: the defaults)."""
+        if self.setting:
+            return get_model_class(model).params_type(**dict(self.setting))
+        return (self.params or {}).get(model)
+
+    def colour_frames(self, model: str) -> bool:
+        """Whether ``model`` takes the clip's decoded colour frames (:meth:`~cdnf_ti.models.base.Model.frame_colour`
+        ``"bgr"``): a video under the clean condition (rainy frames are grey; event bins have no colour)."""
+        if self.events or self.condition != "clean":
+            return False
+        return get_model_class(model).frame_colour(self.model_params(model)) == "bgr"
 
     def entry(self, model: str) -> Entry:
         """The cache entry of ``model``'s trace on this clip."""
@@ -149,9 +165,14 @@ def run_options(model: str, params: dict | None, fps: float | None, color_order:
 
 
 def _resized(frames, factor: float):
+    """Frames (arrays, or :class:`~cdnf_ti.frames.ColourFrame`: both forms) resized by ``factor`` (area average)."""
     for f in frames:
         h, w = f.shape[:2]
-        yield cv2.resize(f, (max(2, round(w * factor)), max(2, round(h * factor))), interpolation=cv2.INTER_AREA)
+        size = (max(2, round(w * factor)), max(2, round(h * factor)))
+        if isinstance(f, ColourFrame):
+            yield ColourFrame(*(cv2.resize(a, size, interpolation=cv2.INTER_AREA) for a in (f.grey, f.bgr)))
+        else:
+            yield cv2.resize(f, size, interpolation=cv2.INTER_AREA)
 
 
 def _resized_bins(bins, factor: float):
@@ -175,13 +196,14 @@ def _open(task: ClipTask):
     return open_source(task.path, fps=task.fps, color_order=task.color_order)
 
 
-def _frames(task: ClipTask, src):
-    """The frame stream of a task (grey; rainy for the rain condition; resized) and the rain object;
+def _frames(task: ClipTask, src, colour: bool = False):
+    """The frame stream of a task (grey, or :class:`~cdnf_ti.frames.ColourFrame` with ``colour``, where a
+    model takes colour frames; rainy, and grey, for the rain condition; resized) and the rain object;
     for an event recording, its bins ``(p_on, p_off)`` (resized)."""
     if isinstance(src, EventSource):
         bins = src.contrast(task.event_threshold)
         return (_resized_bins(bins, task.downscale) if task.downscale != 1.0 else bins), None
-    frames = iter_grey(src)
+    frames = iter_frames(src, colour and task.condition == "clean")
     rain = None
     if task.condition != "clean":
         params = RainParams(**task.rain_params) if task.rain_params else None
@@ -233,9 +255,8 @@ def run_clip_task(task: ClipTask) -> list[dict]:
     names, instances = [], []
     for name in task.models:
         try:
-            params = (get_model_class(name).params_type(**dict(task.setting)) if task.setting
-                      else (task.params or {}).get(name))
-            instances.append(create_model(name, params, backend=task.backend, arch=task.arch, fps=src.fps))
+            instances.append(create_model(name, task.model_params(name), backend=task.backend, arch=task.arch,
+                                          fps=src.fps))
             names.append(name)
         except Exception as e:  # noqa: BLE001 - one model's failure is that model's error row
             records.update((r["model"], r) for r in failed([name], e))
@@ -244,7 +265,7 @@ def run_clip_task(task: ClipTask) -> list[dict]:
         rain = None
         t0 = time.perf_counter()
         try:
-            frames, rain = _frames(task, src)
+            frames, rain = _frames(task, src, takes_colour(instances))
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", NotConvergedWarning)  # recorded as unconverged_frames
                 traces = run_models(instances, frames, progress=False, errors=errors)

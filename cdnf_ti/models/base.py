@@ -23,7 +23,7 @@ from ..alert_rule import AlertRule
 from ..atomic import atomic_write_text
 from ..errors import UserError
 from ..events.binning import DEFAULT_BIN_MS
-from ..frames import to_grey
+from ..frames import ColourFrame, to_grey
 
 
 class NotConvergedWarning(RuntimeWarning):
@@ -322,6 +322,28 @@ class Model:
         """
         return None
 
+    @classmethod
+    def frame_colour(cls, params: Any = None) -> str:
+        """Which frames the model takes from the pipeline: ``"grey"`` (the default) or ``"bgr"``.
+
+        ``"grey"``: the frame as :func:`~cdnf_ti.frames.to_grey` makes it, (H, W). ``"bgr"``: the frame as
+        decoded, (H, W, 3) BGR uint8 where the input has colour, else the grey frame (a generated
+        stimulus, a grey video, a rainy frame). The commands decode each frame once, make it grey
+        once, and hand each model the form it names here (a :class:`~cdnf_ti.frames.ColourFrame`
+        given to :meth:`step` is picked from by this).
+
+        Parameters
+        ----------
+        params : the model's parameter object, optional
+            The parameters the model runs with (None: its defaults); the choice may depend on them.
+
+        Returns
+        -------
+        str
+            ``"grey"`` or ``"bgr"``.
+        """
+        return "grey"
+
     def __init__(self, params: Any = None, *, backend: str = "taichi", arch: str = "cpu", fps: float = 30.0,
                  compiler: str | None = None):
         if backend not in self.BACKENDS:
@@ -364,12 +386,15 @@ class Model:
 
     # -- the per-frame skeleton ------------------------------------------------
     def step(self, frame: np.ndarray) -> StepResult:
-        """Process one frame (2-D grey float in [0, 1] or uint8, or BGR uint8).
+        """Process one frame (2-D grey float in [0, 1] or uint8, or BGR uint8; or a
+        :class:`~cdnf_ti.frames.ColourFrame`, of which it takes the form :meth:`frame_colour` names).
 
         The frame is converted to grey, checked against the model's frame size
         (fixed by the first frame), loaded into the backend, and handed to the
         model's equations (:meth:`_step`). Kernels compiled meanwhile are announced (:meth:`_compiling`).
         """
+        if isinstance(frame, ColourFrame):  # the pipeline's frame in both forms: the one this model takes
+            frame = frame.bgr if self.frame_colour(self.params) == "bgr" else frame.grey
         with self._compiling(np.shape(frame)):
             return self._step_frame(frame)
 
@@ -556,6 +581,12 @@ def bin_ms_for(model: "type[Model] | Model", params: Any = None, bin_ms: float |
     return DEFAULT_BIN_MS if own is None else float(own)
 
 
+def takes_colour(models: "Iterable[Model]") -> bool:
+    """Whether any of ``models`` takes colour frames (:meth:`Model.frame_colour` ``"bgr"`` for its parameters):
+    then a command decodes its frames as :class:`~cdnf_ti.frames.ColourFrame` (:func:`~cdnf_ti.frames.iter_frames`)."""
+    return any(m.frame_colour(m.params) == "bgr" for m in models)
+
+
 def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bool | str = False,
                total: int | None = None, errors: "list[BaseException | None] | None" = None,
                clock: Callable[[], float] = time.perf_counter) -> list[Trace]:
@@ -567,8 +598,9 @@ def run_models(models: "list[Model]", frames: Iterable[np.ndarray], progress: bo
     Parameters
     ----------
     models : list of Model
-    frames : iterable of ndarray or of (p_on, p_off)
-        Frame stream (consumed lazily); a tuple item is an event bin (:meth:`Model.step_on_off`).
+    frames : iterable of ndarray, of ColourFrame or of (p_on, p_off)
+        Frame stream (consumed lazily); a :class:`~cdnf_ti.frames.ColourFrame` gives each model the form
+        it takes (:meth:`Model.frame_colour`); a tuple item is an event bin (:meth:`Model.step_on_off`).
     progress : bool or str
         Show a tqdm progress bar (a string is used as its label).
     total : int, optional

@@ -168,6 +168,10 @@ class LPLC2(Model):
         thr = float(self.params.v_threshold)
         return AlertRule(f"V > {thr:g} mV in a substep (a GF spike)", "V before reset", "V_peak", thr, strict=True)
 
+    #: The frames it takes (:meth:`~cdnf_ti.models.base.Model.frame_colour`): ``"bgr"`` for ``variant="real"``
+    #: (folder 7 reads the green channel), else ``"grey"``.
+    frame_colour = classmethod(lambda cls, params=None: "bgr" if getattr(params, "variant", "") == "real" else "grey")
+
     def _numpy_backend(self, shape: tuple[int, int]) -> NumpyLPLC2Backend:
         if self.params.variant != "arena":  # the float64 real variant: LPLC2Reference(variant="real")
             raise UserError("lplc2: --backend numpy runs variant=arena only (not variant=real)")
@@ -181,15 +185,13 @@ class LPLC2(Model):
             return super()._prepare(frame)
         f = np.asarray(frame)
         grey = f[:, :, 1] if f.ndim == 3 and f.shape[2] == 3 and f.dtype == np.uint8 else to_grey(f)
-        if self._be is None:
+        if self._be is None:  # the backend at the shrunk size
             self._shrink = [imresize_matrix(n, REAL_SCALE) for n in grey.shape]
+            self._make_backend(tuple(m.shape[0] for m in self._shrink), np.dtype(np.float32))
         rows, cols = self._shrink
         if grey.shape != (rows.shape[1], cols.shape[1]):
             raise ValueError(f"frame {self._t} is {grey.shape[1]}x{grey.shape[0]}, not {cols.shape[1]}x{rows.shape[1]}")
-        small = (rows @ (grey / 255.0 if grey.dtype == np.uint8 else grey) @ cols.T).astype(np.float32)
-        if self._be is None:
-            self._make_backend(small.shape, small.dtype)
-        return small
+        return (rows @ (grey / 255.0 if grey.dtype == np.uint8 else grey) @ cols.T).astype(np.float32)
 
     def _taichi_backend(self, shape: tuple[int, int]):
         self.shape = tuple(shape)  # coefficients() places the unit grid and its centre unit
