@@ -620,30 +620,33 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
     # -- the cell action, shared by both layouts: a stage at one cell, and what it gives the reductions --------
     @ti.func
-    def _start_of(stage: ti.template(), lane: ti.template()):
-        """Where ``stage``'s two reductions start: its results' (float64 0, or :data:`LOWEST` for maxes), a lane
-        update's residual vectors' (float32 zeros, maxed lane by lane), else float32 0 (a relaxation's
-        residuals, as lane maxima, or a pixel's)."""
+    def _start_of(stage: ti.template()):
+        """Where ``stage``'s reductions start on a chunk of rows (lane layout): its results' (float64 0, or
+        :data:`LOWEST` for maxes), an update's residuals' (float32 0: a relaxation's lane maxima; else lane
+        vectors, maxed lane by lane)."""
         if ti.static(len(stage.results) > 0):
             start = ti.static(0.0 if stage.kind == "sum" else LOWEST)
             return ti.f64(start), ti.f64(start)
-        elif ti.static(lane and stage.residuals > 0 and len(stage.relax) == 0):
+        elif ti.static(stage.residuals > 0 and len(stage.relax) == 0):
             return _lane_zeros(), _lane_zeros()
         else:
             return ti.f32(0.0), ti.f32(0.0)
 
     @ti.func
-    def _reduce_cell(a: ti.template(), v, kind: ti.template()):
-        """What ``v`` (a stage's result at the cell ``a``) adds to its reduction, float64: the sum or the largest
-        of its frame lanes (:meth:`Cell.frame_mask`), or the pixel's value."""
-        r = ti.f64(0.0)
-        if ti.static(not a.lane):
-            r = ti.cast(v, ti.f64)
-        elif ti.static(kind == "max"):
-            r = ti.cast(run_max(v * a.frame_mask(), LANES), ti.f64)
+    def _accumulate(stage: ti.template(), acc, v, e, W: ti.template()):
+        """``acc`` with what the cell of element ``e`` (counted from 1: the lanes past ``W`` masked) gave (lane
+        layout): a result reduced over its frame lanes in float64 and summed or maxed, a residual maxed."""
+        out = acc
+        if ti.static(len(stage.results) > 0):
+            r = ti.f64(0.0)
+            if ti.static(stage.kind == "max"):
+                r = ti.cast(run_max(v * C.lane_mask(e, W), LANES), ti.f64)
+            else:
+                r = ti.cast((v * C.lane_mask(e, W)).sum(), ti.f64)
+            out = _combine(acc, r, stage.kind)
         else:
-            r = ti.cast((v * a.frame_mask()).sum(), ti.f64)
-        return r
+            out = ti.max(acc, v)
+        return out
 
     @ti.func
     def _combine(acc, r, kind: ti.template()):
@@ -720,35 +723,33 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
     @ti.func
     def _cell_visit(stage: ti.template(), a: ti.template()):
-        """``stage`` at the cell ``a``: what it gives its two reductions (:func:`_start_of` where none): its results
-        (:func:`_reduce_cell`), an update's residuals (lane layout: the masked vectors; a relaxation's: their
-        lane maxima), and whether it moved or (a marking stage) changed anything."""
+        """``stage`` at the cell ``a``: what it gives its (up to two) reductions, and whether it moved or (a
+        marking stage) changed anything. Those are its results as returned, an update's residuals (masked
+        to the frame's lanes; a relaxation's: their lane maxima) or 0."""
         n, m = ti.static(len(stage.relax), len(stage.results))
-        r0, r1 = _start_of(stage, a.lane)
-        moved = 0
         if ti.static(n == 1):
-            ad, mv = _settle(a, stage.relax[0], stage.fn(a))
-            r0, moved = _lane_max(ad, a.lane), mv
+            ad, moved = _settle(a, stage.relax[0], stage.fn(a))
+            return _lane_max(ad, a.lane), 0.0, moved
         elif ti.static(n == 2):
             d0, d1 = stage.fn(a)
             ad0, mv0 = _settle(a, stage.relax[0], d0)
             ad1, mv1 = _settle(a, stage.relax[1], d1)
-            r0, r1, moved = _lane_max(ad0, a.lane), _lane_max(ad1, a.lane), mv0 | mv1
+            return _lane_max(ad0, a.lane), _lane_max(ad1, a.lane), mv0 | mv1
         elif ti.static(stage.marking):
-            moved = stage.fn(a)
+            return 0.0, 0.0, stage.fn(a)
         elif ti.static(stage.residuals == 1):
-            r0 = stage.fn(a) * a.frame_mask()
+            return stage.fn(a) * a.frame_mask(), 0.0, 0
         elif ti.static(stage.residuals == 2):
             q0, q1 = stage.fn(a)
-            r0, r1 = q0 * a.frame_mask(), q1 * a.frame_mask()
+            return q0 * a.frame_mask(), q1 * a.frame_mask(), 0
         elif ti.static(m == 1):
-            r0 = _reduce_cell(a, stage.fn(a), stage.kind)
+            return stage.fn(a), 0.0, 0
         elif ti.static(m == 2):
             q0, q1 = stage.fn(a)
-            r0, r1 = _reduce_cell(a, q0, stage.kind), _reduce_cell(a, q1, stage.kind)
+            return q0, q1, 0
         else:
             stage.fn(a)
-        return r0, r1, moved
+            return 0.0, 0.0, 0
 
     @ti.func
     def _deliver(spec: ti.template(), stage: ti.template(), rbuf: ti.template(), row, col: ti.template(), r0, r1):
@@ -761,9 +762,9 @@ def build(ti, lanes: int) -> SimpleNamespace:
         if ti.static(stage.residuals == 2):
             ti.atomic_max(rbuf[row, col + 1], _lane_max(r1, vectors))
         if ti.static(m >= 1):
-            _publish(ti.static(spec.launch.slot(stage.results[0])), r0, stage.kind)
+            _publish(ti.static(spec.launch.slot(stage.results[0])), ti.cast(r0, ti.f64), stage.kind)
         if ti.static(m == 2):
-            _publish(ti.static(spec.launch.slot(stage.results[1])), r1, stage.kind)
+            _publish(ti.static(spec.launch.slot(stage.results[1])), ti.cast(r1, ti.f64), stage.kind)
 
     # -- the row iterator (lane layout) and the pixel loop: a stage over the frame -----------------------------
     def _lane_stage(stage: Stage):
@@ -775,7 +776,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
         group = stage.spans if stage.spans is not None else stage.marks
         grouped, visits, marks = group is not None, stage.spans is not None, stage.marking
         leaves = visits and bool(stage.relax)
-        kind = stage.kind if stage.results else "max"  # residuals are maxed
+        reduced = max(len(stage.results), stage.residuals)
         refreshed = tuple(q.before for q in stage.relax) + stage.ghosts
         k_span = group.store.slot if grouped else 0
 
@@ -784,7 +785,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
             W, G = ti.static(ctx.spec.W, ctx.spec.ghosts)
             E1 = ti.static((LANES + W - 1) // LANES)  # the elements of a row
             p0 = _read(res, 0)  # the earlier stages' first result, final in this phase
-            acc0, acc1 = _start_of(stage, True)
+            acc0, acc1 = _start_of(stage)
             for i in range(i0, i1):
                 e0, e1, p = G, E1 + G, 0
                 if ti.static(grouped):
@@ -792,9 +793,12 @@ def build(ti, lanes: int) -> SimpleNamespace:
                     if ti.static(visits):
                         e0, e1 = _visit(ctx.x, k_span, p, i, ti.static(ctx.spec.rows(stage)), E1)
                 lo, hi = EMPTY_LO, EMPTY_HI
-                for e in range(e0, e1):
+                for e in range(e0 if ti.static(visits) else G, e1 if ti.static(visits) else E1 + G):  # static: all
                     r0, r1, moved = _cell_visit(stage, ctx.spec.cell(ctx, i, e, (p0,), j))
-                    acc0, acc1 = _combine(acc0, r0, kind), _combine(acc1, r1, kind)
+                    if ti.static(reduced >= 1):
+                        acc0 = _accumulate(stage, acc0, r0, e - G + 1, W)
+                    if ti.static(reduced == 2):
+                        acc1 = _accumulate(stage, acc1, r1, e - G + 1, W)
                     if ti.static(grouped):
                         lo, hi = ti.select(moved != 0, ti.min(lo, e), lo), ti.select(moved != 0, e, hi)
                 if ti.static(leaves):
