@@ -337,18 +337,12 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
 
     @ti.func
-    def fill_ghosts(x: ti.template(), p, i, left: ti.i32, right: ti.i32, W: ti.template(), R: ti.template(),
-                    mode: ti.template()):
-        """Write the R ghost columns left of column 0 / right of column W-1 of row ``i`` of buffer ``p``
-        (``p`` is ignored for a field of one buffer, see :func:`lane_get`); one ghost element either side."""
-        fill_lane_ghosts(x, p, i, left, right, W, R, mode, 1)
-
-
-    @ti.func
     def fill_lane_ghosts(x: ti.template(), p, i, left: ti.i32, right: ti.i32, W: ti.template(), R: ti.template(),
                          mode: ti.template(), G: ti.template()):
-        """:func:`fill_ghosts` for a row with ``G`` ghost elements either side (column ``c`` at flat position
-        ``G LANES + c``), ``R <= G LANES`` columns each side."""
+        """Write the ``R`` ghost columns left of column 0 (if ``left``) / right of column W-1 (if ``right``) of row
+        ``i`` of buffer ``p`` (ignored for a field of one buffer, see :func:`lane_get`), by the border ``mode``,
+        for a row with ``G`` ghost elements either side (column ``c`` at flat position ``G LANES + c``),
+        ``R <= G LANES``."""
         if left:
             for run in ti.static(unrolled_runs(R)):
                 for d in ti.static(run):

@@ -717,16 +717,35 @@ def build(ti, lanes: int) -> SimpleNamespace:
         """The cells of one kernel: :class:`Cell` with that kernel's compile-time choices."""
         return type("Cell", (Cell,), {"__slots__": (), "spec": spec})
 
-    # -- the row iterator: a stage on rows [i0, i1), reduced -----------------------------------------
+    # -- the cell action, shared by both layouts: a stage at one cell, and what it gives the reductions --------
     @ti.func
-    def _reduce_lane(v, e, W: ti.template(), kind: ti.template()):
-        """The reduction of lane vector ``v`` of element ``e`` (counted from 1: the lanes past ``W`` masked)."""
-        r = ti.f64(0.0)
-        if ti.static(kind == "max"):
-            r = ti.cast(run_max(v * C.lane_mask(e, W), LANES), ti.f64)
+    def _start_of(stage: ti.template()):
+        """Where ``stage``'s reductions start on a chunk of rows (lane layout): its results' (float64 0, or
+        :data:`LOWEST` for maxes), an update's residuals' (float32 0: a relaxation's lane maxima; else lane
+        vectors, maxed lane by lane)."""
+        if ti.static(len(stage.results) > 0):
+            start = ti.static(0.0 if stage.kind == "sum" else LOWEST)
+            return ti.f64(start), ti.f64(start)
+        elif ti.static(stage.residuals > 0 and len(stage.relax) == 0):
+            return _lane_zeros(), _lane_zeros()
         else:
-            r = ti.cast((v * C.lane_mask(e, W)).sum(), ti.f64)
-        return r
+            return ti.f32(0.0), ti.f32(0.0)
+
+    @ti.func
+    def _accumulate(stage: ti.template(), acc, v, e, W: ti.template()):
+        """``acc`` with what the cell of element ``e`` (counted from 1: the lanes past ``W`` masked) gave (lane
+        layout): a result reduced over its frame lanes in float64 and summed or maxed, a residual maxed."""
+        out = acc
+        if ti.static(len(stage.results) > 0):
+            r = ti.f64(0.0)
+            if ti.static(stage.kind == "max"):
+                r = ti.cast(run_max(v * C.lane_mask(e, W), LANES), ti.f64)
+            else:
+                r = ti.cast((v * C.lane_mask(e, W)).sum(), ti.f64)
+            out = _combine(acc, r, stage.kind)
+        else:
+            out = ti.max(acc, v)
+        return out
 
     @ti.func
     def _combine(acc, r, kind: ti.template()):
@@ -741,49 +760,6 @@ def build(ti, lanes: int) -> SimpleNamespace:
             ti.atomic_max(res[slot], acc)
         else:
             ti.atomic_add(res[slot], acc)
-
-    def _row_stage(stage: Stage):
-        """The scheduler's stage ``run(ctx, i0, i1, j)`` of ``stage`` on the lane layout."""
-        n, kind = len(stage.results), stage.kind
-
-        @ti.func
-        def run(ctx: ti.template(), i0, i1, j):
-            W = ti.static(ctx.spec.W)
-            G = ti.static(ctx.spec.ghosts)
-            start = ti.static(0.0 if kind == "sum" else LOWEST)
-            a0, a1 = ti.f64(start), ti.f64(start)
-            m0, m1 = _lane_zeros(), _lane_zeros()  # an update's residuals, maxed as vectors, reduced once
-            p0 = _read(res, 0)  # the earlier stages' first result, final in this phase
-            for i in range(i0, i1):
-                for e in range(G, (LANES + W - 1) // LANES + G):
-                    e1 = e - G + 1  # the element counted from 1 (lane_mask)
-                    if ti.static(stage.residuals == 1):
-                        m0 = ti.max(m0, stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j)) * C.lane_mask(e1, W))
-                    elif ti.static(stage.residuals == 2):
-                        q0, q1 = stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j))
-                        m0 = ti.max(m0, q0 * C.lane_mask(e1, W))
-                        m1 = ti.max(m1, q1 * C.lane_mask(e1, W))
-                    elif ti.static(n == 0):
-                        stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j))
-                    elif ti.static(n == 1):
-                        a0 = _combine(a0, _reduce_lane(stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j)), e1, W, kind), kind)
-                    else:
-                        r0, r1 = stage.fn(ctx.spec.cell(ctx, i, e, (p0,), j))
-                        a0 = _combine(a0, _reduce_lane(r0, e1, W, kind), kind)
-                        a1 = _combine(a1, _reduce_lane(r1, e1, W, kind), kind)
-                for g in ti.static(stage.ghosts):
-                    C.fill_lane_ghosts(ctx.x, _index(ctx.c, g, _turn(ctx.spec, g, j)), i, 1, 1, W,
-                                       ti.static(ctx.spec.halo(stage)), ti.static(ctx.spec.border(g)[0]), G)
-            if ti.static(stage.residuals >= 1):
-                ti.atomic_max(sched.rbuf[j, 0], run_max(m0, LANES))
-            if ti.static(stage.residuals == 2):
-                ti.atomic_max(sched.rbuf[j, 1], run_max(m1, LANES))
-            if ti.static(n >= 1):
-                _publish(ti.static(ctx.spec.launch.slot(stage.results[0])), a0, kind)
-            if ti.static(n == 2):
-                _publish(ti.static(ctx.spec.launch.slot(stage.results[1])), a1, kind)
-
-        return run
 
     # -- pending spans (lane layout): the elements a span group's stage visits, and what it leaves ------------
     @ti.func
@@ -828,7 +804,7 @@ def build(ti, lanes: int) -> SimpleNamespace:
         moved = 0
         if ti.static(a.lane):
             tau = _read(a.fr, ti.static(a.spec.launch.tau))
-            ad = C.lane_abs(d) * C.lane_mask(a.j - ti.static(a.spec.ghosts - 1), a.spec.W)
+            ad = C.lane_abs(d) * a.frame_mask()
             a.x[k_prev, a.i, a.j] = ti.select(ad > tau, nx, u)
             moved = ti.select(run_max(ad, LANES) > tau, 1, 0)
         else:
@@ -846,94 +822,104 @@ def build(ti, lanes: int) -> SimpleNamespace:
 
     @ti.func
     def _cell_visit(stage: ti.template(), a: ti.template()):
-        """``stage`` at the cell ``a``: its residuals' lane maxima (0 where none) and whether it moved
-        or (a marking stage) changed anything."""
-        n, marks = ti.static(len(stage.relax), stage.marking)
-        r0, r1, moved = ti.f32(0.0), ti.f32(0.0), 0
+        """``stage`` at the cell ``a``: what it gives its (up to two) reductions, and whether it moved or (a
+        marking stage) changed anything. Those are its results as returned, an update's residuals (masked
+        to the frame's lanes; a relaxation's: their lane maxima) or 0."""
+        n, m = ti.static(len(stage.relax), len(stage.results))
         if ti.static(n == 1):
-            ad, mv = _settle(a, stage.relax[0], stage.fn(a))
-            r0, moved = _lane_max(ad, a.lane), mv
+            ad, moved = _settle(a, stage.relax[0], stage.fn(a))
+            return _lane_max(ad, a.lane), 0.0, moved
         elif ti.static(n == 2):
             d0, d1 = stage.fn(a)
             ad0, mv0 = _settle(a, stage.relax[0], d0)
             ad1, mv1 = _settle(a, stage.relax[1], d1)
-            r0, r1, moved = _lane_max(ad0, a.lane), _lane_max(ad1, a.lane), mv0 | mv1
-        elif ti.static(marks):
-            moved = stage.fn(a)
+            return _lane_max(ad0, a.lane), _lane_max(ad1, a.lane), mv0 | mv1
+        elif ti.static(stage.marking):
+            return 0.0, 0.0, stage.fn(a)
+        elif ti.static(stage.residuals == 1):
+            return stage.fn(a) * a.frame_mask(), 0.0, 0
+        elif ti.static(stage.residuals == 2):
+            q0, q1 = stage.fn(a)
+            return q0 * a.frame_mask(), q1 * a.frame_mask(), 0
+        elif ti.static(m == 1):
+            return stage.fn(a), 0.0, 0
+        elif ti.static(m == 2):
+            q0, q1 = stage.fn(a)
+            return q0, q1, 0
         else:
             stage.fn(a)
-        return r0, r1, moved
+            return 0.0, 0.0, 0
 
-    def _span_stage(stage: Stage):
-        """The scheduler's stage ``run(ctx, i0, i1, j)`` of a relaxation, span or marking stage (lane layout)."""
+    @ti.func
+    def _deliver(spec: ti.template(), stage: ti.template(), rbuf: ti.template(), row, col: ti.template(), r0, r1):
+        """Hand what ``stage`` reduced (``r0, r1``: over a chunk of rows, or at one pixel) to the launch: its
+        results to the launch's (:func:`_publish`), its residuals maxed into ``rbuf[row, col]`` and
+        ``rbuf[row, col + 1]`` (a lane update's residual vectors maxed over their lanes first)."""
+        m, vectors = ti.static(len(stage.results), spec.lane and len(stage.relax) == 0)
+        if ti.static(stage.residuals >= 1):
+            ti.atomic_max(rbuf[row, col], _lane_max(r0, vectors))
+        if ti.static(stage.residuals == 2):
+            ti.atomic_max(rbuf[row, col + 1], _lane_max(r1, vectors))
+        if ti.static(m >= 1):
+            _publish(ti.static(spec.launch.slot(stage.results[0])), ti.cast(r0, ti.f64), stage.kind)
+        if ti.static(m == 2):
+            _publish(ti.static(spec.launch.slot(stage.results[1])), ti.cast(r1, ti.f64), stage.kind)
+
+    # -- the row iterator (lane layout) and the pixel loop: a stage over the frame -----------------------------
+    def _lane_stage(stage: Stage):
+        """The scheduler's stage ``run(ctx, i0, i1, j)`` of ``stage`` on the lane layout: rows ``[i0, i1)``, each
+        the cell action (:func:`_cell_visit`) element by element, then the row's ghost refresh. Compile-time
+        choices of the stage: the elements (all, or with ``spans`` the visit range of a pending span), what a
+        row leaves (a relaxation: the other parity's spans; ``marks``: both parities') and the ghost columns
+        refreshed (of the buffers it wrote, then its ``ghosts``; on a side only when the elements reach it)."""
         group = stage.spans if stage.spans is not None else stage.marks
-        n = len(stage.relax)
-        grouped, visits, marks = group is not None, stage.spans is not None, stage.marks is not None
-        refreshed = tuple(q.before for q in stage.relax) + stage.ghosts  # the buffers written, then the others
+        grouped, visits, marks = group is not None, stage.spans is not None, stage.marking
+        leaves = visits and bool(stage.relax)
+        reduced = max(len(stage.results), stage.residuals)
+        refreshed = tuple(q.before for q in stage.relax) + stage.ghosts
         k_span = group.store.slot if grouped else 0
 
         @ti.func
         def run(ctx: ti.template(), i0, i1, j):
-            W = ti.static(ctx.spec.W)
-            E1 = ti.static((LANES + W - 1) // LANES)
-            rows = ti.static(ctx.spec.rows(stage))
-            p0 = _read(res, 0)
-            m0, m1 = ti.f32(0.0), ti.f32(0.0)
+            W, G = ti.static(ctx.spec.W, ctx.spec.ghosts)
+            E1 = ti.static((LANES + W - 1) // LANES)  # the elements of a row
+            p0 = _read(res, 0)  # the earlier stages' first result, final in this phase
+            acc0, acc1 = _start_of(stage)
             for i in range(i0, i1):
-                e0, e1 = 1, E1 + 1
-                p = 0
+                e0, e1, p = G, E1 + G, 0
                 if ti.static(grouped):
                     p = ((ctx.c >> ti.static(group.pair.bit)) ^ _turn(ctx.spec, group.pair, j)) & 1
                     if ti.static(visits):
-                        e0, e1 = _visit(ctx.x, k_span, p, i, rows, E1)
+                        e0, e1 = _visit(ctx.x, k_span, p, i, ti.static(ctx.spec.rows(stage)), E1)
                 lo, hi = EMPTY_LO, EMPTY_HI
-                for e in range(e0, e1):
+                for e in range(e0 if ti.static(visits) else G, e1 if ti.static(visits) else E1 + G):  # static: all
                     r0, r1, moved = _cell_visit(stage, ctx.spec.cell(ctx, i, e, (p0,), j))
-                    m0, m1 = ti.max(m0, r0), ti.max(m1, r1)
-                    lo = ti.select(moved != 0, ti.min(lo, e), lo)
-                    hi = ti.select(moved != 0, e, hi)
-                if ti.static(n > 0 and visits):
+                    if ti.static(reduced >= 1):
+                        acc0 = _accumulate(stage, acc0, r0, e - G + 1, W)
+                    if ti.static(reduced == 2):
+                        acc1 = _accumulate(stage, acc1, r1, e - G + 1, W)
+                    if ti.static(grouped):
+                        lo, hi = ti.select(moved != 0, ti.min(lo, e), lo), ti.select(moved != 0, e, hi)
+                if ti.static(leaves):
                     _span_set(ctx.x, k_span, i, 1 - p, lo, hi)
                 if ti.static(marks):
                     _span_mark(ctx.x, k_span, i, lo, hi)
                 if e0 < e1:
                     for g in ti.static(refreshed):
-                        C.fill_ghosts(ctx.x, _index(ctx.c, g, _turn(ctx.spec, g, j)), i,
-                                      e0 == 1, e1 == E1 + 1, W, ti.static(ctx.spec.halo(stage)),
-                                      ti.static(ctx.spec.border(g)[0]))
-            if ti.static(n >= 1):
-                ti.atomic_max(sched.rbuf[j, 0], m0)
-            if ti.static(n == 2):
-                ti.atomic_max(sched.rbuf[j, 1], m1)
+                        C.fill_lane_ghosts(ctx.x, _index(ctx.c, g, _turn(ctx.spec, g, j)), i, e0 == G, e1 == E1 + G,
+                                           W, ti.static(ctx.spec.halo(stage)), ti.static(ctx.spec.border(g)[0]), G)
+            _deliver(ctx.spec, stage, sched.rbuf, j, 0, acc0, acc1)
 
         return run
 
     @ti.func
     def _pixel_stage(ctx: ti.template(), stage: ti.template(), step):
-        """One parallel loop of ``stage`` over the pixels (the pixel layout); an update's residuals are
-        maxed into the launch record's row ``step`` (columns 2..)."""
-        n = ti.static(len(stage.results))
+        """One parallel loop of ``stage`` over the pixels (the pixel layout): the cell action at each pixel, its
+        results published per pixel, an update's residuals maxed into the launch record's row ``step``
+        (columns 2..)."""
         for i, j in ti.ndrange(ctx.x.shape[1], ctx.x.shape[2]):
-            if ti.static(len(stage.relax) > 0):
-                r0, r1, moved = _cell_visit(stage, ctx.spec.cell(ctx, i, j, (), step))
-                ti.atomic_max(ctx.rec[step, 2], r0)
-                if ti.static(len(stage.relax) == 2):
-                    ti.atomic_max(ctx.rec[step, 3], r1)
-            elif ti.static(stage.residuals == 1):
-                ti.atomic_max(ctx.rec[step, 2], stage.fn(ctx.spec.cell(ctx, i, j, (), step)))
-            elif ti.static(stage.residuals == 2):
-                q0, q1 = stage.fn(ctx.spec.cell(ctx, i, j, (), step))
-                ti.atomic_max(ctx.rec[step, 2], q0)
-                ti.atomic_max(ctx.rec[step, 3], q1)
-            elif ti.static(n == 0):
-                stage.fn(ctx.spec.cell(ctx, i, j, (), step))
-            elif ti.static(n == 1):
-                _publish(ti.static(ctx.spec.launch.slot(stage.results[0])),
-                         ti.cast(stage.fn(ctx.spec.cell(ctx, i, j, (), step)), ti.f64), stage.kind)
-            else:
-                r0, r1 = stage.fn(ctx.spec.cell(ctx, i, j, (), step))
-                _publish(ti.static(ctx.spec.launch.slot(stage.results[0])), ti.cast(r0, ti.f64), stage.kind)
-                _publish(ti.static(ctx.spec.launch.slot(stage.results[1])), ti.cast(r1, ti.f64), stage.kind)
+            r0, r1, _ = _cell_visit(stage, ctx.spec.cell(ctx, i, j, (), step))
+            _deliver(ctx.spec, stage, ctx.rec, step, 2, r0, r1)
 
     @ti.func
     def _controls(ctx: ti.template()):
@@ -982,12 +968,9 @@ def build(ti, lanes: int) -> SimpleNamespace:
             raise ValueError(f"{launch.name}: pending spans take one ghost element either side (halo < lanes)")
         spec.cell = _cell_class(spec)
         if lane:
-            def row(s):
-                return _span_stage(s) if s.visits else _row_stage(s)
-
-            run_plan = workers(Plan(before=tuple(row(s) for s in launch.before),
-                                    update=tuple(row(s) for s in launch.update),
-                                    after=tuple(row(s) for s in launch.stages), controls=_controls_of(launch)))
+            run_plan = workers(Plan(before=tuple(_lane_stage(s) for s in launch.before),
+                                    update=tuple(_lane_stage(s) for s in launch.update),
+                                    after=tuple(_lane_stage(s) for s in launch.stages), controls=_controls_of(launch)))
 
             @ti.kernel
             def run_lanes(x: C.LANE3, coef: F1, fr: F1, frame: ti.types.ndarray(), c: ti.i32, nw: ti.i32,
