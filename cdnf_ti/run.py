@@ -218,6 +218,7 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
     errors: list = [None] * len(models)
     sources: list = [src] * len(models)  # the source each model read: its recording's bins at its width
     events = isinstance(src, EventSource)
+    colour_input = not events and rain_params is None  # rain makes grey frames; event bins have no colour
     problems: list[str] = []
     for source, idx in input_passes(src, models, params, args.bin_ms):
         names = [models[i] for i in idx]
@@ -227,8 +228,7 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", NotConvergedWarning)  # reported per line below
-                # colour frames where a model takes them (rain makes grey frames; event bins have no colour)
-                colour = not events and rain_params is None and takes_colour(readers)
+                colour = colour_input and takes_colour(readers)  # frames in both forms where a model takes colour
                 frames = source.contrast(args.event_threshold) if events else iter_frames(source, colour)
                 if rain_params is not None:
                     rain = RainyFrames(frames, rain_params, seed=rain_seed)
@@ -262,7 +262,7 @@ def _run_one(args, models, params, out: Path, path, src, clip: str, index: int, 
         trace_name = trace_file_name(clip, name, condition)
         trace.to_csv(inside(out, trace_name))
         settings = run_settings(args, path, source, rain_params, rain_seed,
-                                colour=not events and rain_params is None and takes_colour([model]))
+                                colour=colour_input and takes_colour([model]))
         alert = alert_summary(trace, model.alert_rule(), source.fps)
         fa = alert.first_alert
         fa_txt = f"{fa} ({alert.first_alert_s:.2f} s)" if fa is not None else "none"
