@@ -19,6 +19,7 @@ runs moved by up to 30 %, the best by a few %).
 from __future__ import annotations
 
 import argparse
+import gc
 import statistics
 import sys
 import time
@@ -65,7 +66,8 @@ def time_model(make: Callable[[], object], frames: Sequence[np.ndarray], repeats
     """Frames/s of ``make()`` stepping over ``frames`` (frame 0 excluded), each step timed.
 
     A first untimed pass over three frames compiles the kernels. Every repeat starts
-    from a reset model, so the repeats step through the same states.
+    from a reset model, so the repeats step through the same states, and after a garbage
+    collection, so that none falls due inside it.
     """
     model = make()
     for f in frames[:3]:
@@ -77,6 +79,7 @@ def time_model(make: Callable[[], object], frames: Sequence[np.ndarray], repeats
     for rep in range(max(1, repeats)):
         model.reset()
         outs, diags = [], []
+        gc.collect()  # a full collection due mid-repeat would be timed as the model's (100 ms with a compiler loaded)
         r = model.step(frames[0])
         outs.append(r.output)
         diags.append(r.diagnostics)
