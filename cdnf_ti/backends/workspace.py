@@ -9,12 +9,6 @@ import numpy as np
 from ..taichi_runtime import kernels, lanes
 
 
-def event_bin(p_on: np.ndarray, p_off: np.ndarray) -> np.ndarray:
-    """An event bin as every model's ON/OFF input stage takes it (one array, one upload): ``p_on`` and
-    ``p_off`` (H, W each, contrast in [0, 1]) stacked, float32, shape (2, H, W)."""
-    return np.ascontiguousarray(np.stack([p_on, p_off]), dtype=np.float32)
-
-
 class Scratch:
     """The per-launch scratch of the persistent-worker kernels, one set per process.
 
