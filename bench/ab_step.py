@@ -33,23 +33,30 @@ import statistics
 import subprocess
 import sys
 
-CHILD = r"""
+#: The children's frames: ``n + 10`` frames of ``clip`` resized to ``width`` x ``height`` (grey), or of the
+#: stand-in video; decoded by the ``cdnf_ti`` package given.
+FRAMES = r"""
+def load_frames(cdnf_ti, clip, width, height, n):
+    if clip:
+        import cv2
+        frames = []
+        for g in cdnf_ti.iter_grey(cdnf_ti.open_source(clip)):
+            frames.append(cv2.resize(g, (width, height), interpolation=cv2.INTER_AREA))
+            if len(frames) >= n + 10:
+                break
+        return frames
+    from cdnf_ti.bench.inputs import standin_video
+    return [f[:height, :width] for f in standin_video(n + 10, seed=1)]
+"""
+
+CHILD = FRAMES + r"""
 import gc, json, sys, time
 import numpy as np
+import cdnf_ti
 from cdnf_ti import MODELS, create_model
 model_names, clip = (list(MODELS) if sys.argv[1] == "all" else sys.argv[1].split(",")), sys.argv[2]
 width, height, n = int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5])
-if clip:
-    import cv2
-    from cdnf_ti import iter_grey, open_source
-    frames = []
-    for g in iter_grey(open_source(clip)):
-        frames.append(cv2.resize(g, (width, height), interpolation=cv2.INTER_AREA))
-        if len(frames) >= n + 10:
-            break
-else:
-    from cdnf_ti.bench.inputs import standin_video
-    frames = [f[:height, :width] for f in standin_video(n + 10, seed=1)]
+frames = load_frames(cdnf_ti, clip, width, height, n)
 out = {}
 for name in model_names:
     m = create_model(name)
@@ -65,7 +72,7 @@ for name in model_names:
 print("RESULT " + json.dumps(out))
 """
 
-CHILD_PAIR = r"""
+CHILD_PAIR = FRAMES + r"""
 import gc, json, os, sys, time
 import numpy as np
 PACKAGES = ("cdnf_ti", "kernels", "stimuli", "bench")
@@ -99,16 +106,7 @@ for checkout in checkouts:
     modules.append({k: v for k, v in sys.modules.items() if ours(k)})
     packages.append(cdnf_ti)
     if len(packages) == 1:  # the frames, decoded once by the first version
-        if clip:
-            import cv2
-            frames = []
-            for g in cdnf_ti.iter_grey(cdnf_ti.open_source(clip)):
-                frames.append(cv2.resize(g, (width, height), interpolation=cv2.INTER_AREA))
-                if len(frames) >= n + 10:
-                    break
-        else:
-            from cdnf_ti.bench.inputs import standin_video
-            frames = [f[:height, :width] for f in standin_video(n + 10, seed=1)]
+        frames = load_frames(cdnf_ti, clip, width, height, n)
 active, own = len(modules) - 1, []
 
 
@@ -187,24 +185,26 @@ def _run_pair(first: str, second: str, models: list[str], args: argparse.Namespa
         raise SystemExit("error: --interleave: A and B must name the same PYTHON (both checkouts run in one process)")
     proc = subprocess.run([python, "-c", CHILD_PAIR, os.pathsep.join([c1, c2]), ",".join(models), args.clip or "",
                            *_size(args), str(args.frames)], env=_env(args), capture_output=True, text=True)
-    got = [ln[7:] for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
-    if proc.returncode != 0 or not got:
-        raise SystemExit(f"error: {c1}, {c2}: the child failed:\n{proc.stderr[-2000:]}")
     for line in proc.stderr.splitlines():  # where each version's code came from
         if line.startswith("LOADED "):
             print(line, file=sys.stderr)
-    a, b = json.loads(got[-1])
+    a, b = _result(proc, f"{c1}, {c2}")
     return a, b
+
+
+def _result(proc: subprocess.CompletedProcess, what: str):
+    """The child's ``RESULT`` line, parsed; one error line naming ``what`` if the child failed."""
+    got = [ln[7:] for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
+    if proc.returncode != 0 or not got:
+        raise SystemExit(f"error: {what}: the child failed:\n{proc.stderr[-2000:]}")
+    return json.loads(got[-1])
 
 
 def _run(spec: str, models: list[str], args: argparse.Namespace) -> dict:
     python, checkout = spec.split(":", 1)
     proc = subprocess.run([python, "-c", CHILD, ",".join(models), args.clip or "", *_size(args), str(args.frames)],
                           cwd=checkout, env=_env(args), capture_output=True, text=True)
-    got = [ln[7:] for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
-    if proc.returncode != 0 or not got:
-        raise SystemExit(f"error: {checkout}: the child failed:\n{proc.stderr[-2000:]}")
-    return json.loads(got[-1])
+    return _result(proc, checkout)
 
 
 def main(argv=None) -> int:
