@@ -585,6 +585,16 @@ def current_compiler() -> str | None:
     return _compiler
 
 
+def caches_launch_arguments() -> bool:
+    """Whether the running compiler caches a launch's argument handling by the identity of its array arguments.
+
+    quadrants does (an entry per new array, alive as long as the array): a caller that passes the same
+    array every launch hits the cache; one that passes a new array each frame misses it and keeps an
+    entry per frame while the frames live. taichi 1.7.4 caches nothing by identity.
+    """
+    return _compiler == "quadrants"
+
+
 def cpu_threads() -> int:
     """Threads of the runtime's CPU thread pool (``cpu_max_num_threads``; at least 1)."""
     ti = dsl()

@@ -45,3 +45,22 @@ def test_a_frame_changed_after_its_step_does_not_change_the_trace():
         f[:] = 0  # the caller reuses its buffer
     out_copied = [copied.step(f.copy()).output for f in _frames(12, seed=2)]
     assert out_held == out_copied
+
+
+def test_the_runtime_says_whether_the_compiler_keeps_an_entry_per_new_launch_array():
+    from cdnf_ti.taichi_runtime import caches_launch_arguments, dsl, ensure_taichi
+
+    ensure_taichi("cpu")
+    ti = dsl()
+
+    @ti.kernel
+    def total(a: ti.types.ndarray()) -> ti.f32:
+        s = 0.0
+        for i in range(a.shape[0]):
+            s += a[i]
+        return s
+
+    arrays = [np.full(8, k, np.float32) for k in range(40)]  # held, as a benchmark holds its frames
+    total(arrays[0])  # compiled
+    kept = _objects_kept(total, arrays[1:])
+    assert (kept >= len(arrays) - 1) == caches_launch_arguments()

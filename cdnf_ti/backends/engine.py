@@ -15,7 +15,7 @@ import numpy as np
 from ..kernels import engine
 from ..kernels.common import LaunchRecord
 from ..kernels.schedule import MAX_WORKERS
-from ..taichi_runtime import cpu_threads, current_compiler, dsl, ensure_taichi, kernels, lanes
+from ..taichi_runtime import caches_launch_arguments, cpu_threads, dsl, ensure_taichi, kernels, lanes
 from .workspace import Scratch
 
 
@@ -62,7 +62,7 @@ class Backend:
         self.nw = min(cpu_threads(), MAX_WORKERS)
         self.lock = Scratch.get().lock  # the engine's scratch is one per process (Model.step holds it)
         self.frame: np.ndarray = np.zeros((H, W), np.float32)
-        self.hold_input = current_compiler() == "quadrants"  # frames into one buffer (:meth:`_input`)
+        self.hold_input = caches_launch_arguments()  # frames into one buffer (:meth:`_input`)
         self.reset()
 
     @staticmethod
@@ -107,8 +107,8 @@ class Backend:
         return ((1 << self.M.planes.pairs) - 1 if self.parity else 0) ^ self.turned
 
     def load(self, grey: np.ndarray, first: bool) -> None:
-        """Keep the frame (H, W; uint8, or float in [0, 1]) as the input of the next launches (under quadrants a
-        copy in the backend's input buffer, :meth:`_input`)."""
+        """Keep the frame (H, W; uint8, or float in [0, 1]) as the input of the next launches (a copy in the
+        backend's input buffer, :meth:`_input`, where the compiler caches launch arguments by identity)."""
         if self.hold_input:
             self._input(grey.shape, grey.dtype)[...] = grey
         else:
@@ -123,10 +123,11 @@ class Backend:
     def _input(self, shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:
         """The launches' input array for inputs of ``shape`` and ``dtype``: one buffer, refilled each frame.
 
-        quadrants caches a launch's argument handling by the arguments' identity: the same array every frame
-        hits that cache, while a new one misses it and leaves an entry alive as long as the array (a program
-        holding its frames then pays full garbage collections). taichi caches nothing by identity, and there
-        the copy costs 2-3 % of a 1 ms frame, so frames are copied only under quadrants (``hold_input``)."""
+        Under a compiler that caches launch arguments by identity
+        (:func:`~cdnf_ti.taichi_runtime.caches_launch_arguments`), the same array every frame hits that cache,
+        while a new one would keep an entry alive as long as the frame (a program holding its frames then pays
+        full garbage collections). Elsewhere the copy costs 2-3 % of a 1 ms frame, so frames are copied only
+        there (``hold_input``); event bins, stacked anyway, always are."""
         if self.frame.shape != tuple(shape) or self.frame.dtype != dtype:
             self.frame = np.empty(shape, dtype)
         return self.frame
